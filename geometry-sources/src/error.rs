@@ -1,0 +1,40 @@
+//! The one error type of this crate. Every variant names the file (when there is one) and the problem,
+//! because users feed this crate broken files and must be told which and why.
+
+use std::path::PathBuf;
+
+/// Anything that can go wrong reading or sampling geometry.
+#[derive(Debug, thiserror::Error)]
+pub enum GeometryError {
+    /// The file could not be read at all (missing, a directory, permissions).
+    #[error("cannot read {path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The file was read but its content is not valid for its format.
+    #[error("{path}: {message}")]
+    Malformed { path: PathBuf, message: String },
+    /// The content parsed but is unusable (no faces, NaN coordinates, ...).
+    #[error("{path}: {message}")]
+    Invalid { path: PathBuf, message: String },
+    /// A source's options table is wrong (unknown key, wrong type, bad value).
+    #[error("geometry source `{source_name}`: {message}")]
+    Options { source_name: String, message: String },
+    /// No source is registered under this name.
+    #[error("unknown geometry source `{name}`; known sources: {known}")]
+    UnknownSource { name: String, known: String },
+}
+
+impl GeometryError {
+    /// Shorthand for [`GeometryError::Malformed`].
+    pub fn malformed(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
+        Self::Malformed { path: path.into(), message: message.into() }
+    }
+
+    /// Shorthand for [`GeometryError::Invalid`].
+    pub fn invalid(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
+        Self::Invalid { path: path.into(), message: message.into() }
+    }
+}

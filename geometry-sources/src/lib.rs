@@ -1,0 +1,24 @@
+//! Geometry sources for Nuvo.
+//!
+//! Nuvo needs one thing from the scene: batches of visible surface points with unit normals. Every
+//! input kind (triangle mesh, point cloud, density field) implements [`GeometrySource`] and is built
+//! by name through the [`SourceRegistry`], so an experiment config picks one with
+//! `[geometry] source = "mesh"`.
+//!
+//! **Frame invariant.** Everything a source hands out (samples, bounds, its mesh) is in the
+//! *canonical frame*: centred on the input's bounding-box centre and scaled so the longest half-extent
+//! is 1, i.e. inside `[-1, 1]^3`. [`GeometrySource::to_canonical`] is the similarity that got it there;
+//! writers apply its inverse so outputs land in the input's own coordinates.
+
+pub mod error;
+pub mod frame;
+pub mod mesh;
+pub mod obj;
+pub mod registry;
+pub mod source;
+
+pub use error::GeometryError;
+pub use frame::{Aabb, Similarity};
+pub use mesh::{TriMesh, UvLayer};
+pub use registry::{BuildContext, SourceBuilder, SourceRegistry};
+pub use source::{GeometrySource, SurfaceSamples};

@@ -1,0 +1,145 @@
+//! The triangle mesh shared by every crate that reads, bakes, exports or measures meshes.
+
+use crate::frame::{Aabb, Similarity};
+
+/// A triangle mesh, optionally with texture coordinates.
+///
+/// Invariants (checked by [`TriMesh::validate`], which every loader calls):
+/// - every index in `triangles` is `< positions.len()`;
+/// - every coordinate is finite;
+/// - if `uv` is present, `uv.triangles.len() == triangles.len()` and its indices are in range.
+///
+/// Degenerate (zero-area) triangles are allowed: NeRF meshes are full of them and samplers simply
+/// give them zero weight.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TriMesh {
+    /// Vertex positions.
+    pub positions: Vec<[f32; 3]>,
+    /// Vertex indices of each triangle, counter-clockwise seen from outside.
+    pub triangles: Vec<[u32; 3]>,
+    /// Per-corner texture coordinates, when the mesh has them.
+    pub uv: Option<UvLayer>,
+}
+
+/// Texture coordinates indexed per triangle corner, as OBJ stores them (`f v/vt`): a vertex on a UV
+/// seam has one position and several UVs. `triangles[f][k]` indexes `coords` for corner `k` of face `f`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct UvLayer {
+    pub coords: Vec<[f32; 2]>,
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl TriMesh {
+    /// The three corner positions of triangle `f`.
+    pub fn corners(&self, f: usize) -> [[f32; 3]; 3] {
+        self.triangles[f].map(|v| self.positions[v as usize])
+    }
+
+    /// Twice the area of triangle `f` times its unit normal (the unnormalised cross product).
+    pub fn face_normal_scaled(&self, f: usize) -> [f32; 3] {
+        let [a, b, c] = self.corners(f);
+        let e1 = sub(b, a);
+        let e2 = sub(c, a);
+        cross(e1, e2)
+    }
+
+    /// The area of triangle `f`.
+    pub fn face_area(&self, f: usize) -> f32 {
+        0.5 * norm(self.face_normal_scaled(f))
+    }
+
+    /// The bounding box of the referenced and unreferenced vertices, `None` for an empty mesh.
+    pub fn bounds(&self) -> Option<Aabb> {
+        Aabb::from_points(&self.positions)
+    }
+
+    /// Applies `s` to every position (UVs are untouched).
+    pub fn transform(&mut self, s: &Similarity) {
+        for p in &mut self.positions {
+            *p = s.apply(*p);
+        }
+    }
+
+    /// Checks the invariants listed on the type, reporting the first violation in words.
+    pub fn validate(&self) -> Result<(), String> {
+        if let Some(i) = self.positions.iter().position(|p| p.iter().any(|c| !c.is_finite())) {
+            return Err(format!("vertex {} has a non-finite coordinate {:?}", i + 1, self.positions[i]));
+        }
+        let nv = self.positions.len();
+        for (f, t) in self.triangles.iter().enumerate() {
+            if let Some(&v) = t.iter().find(|&&v| v as usize >= nv) {
+                return Err(format!(
+                    "face {} refers to vertex {} but there are only {nv} vertices",
+                    f + 1,
+                    v as usize + 1
+                ));
+            }
+        }
+        if let Some(uv) = &self.uv {
+            if uv.triangles.len() != self.triangles.len() {
+                return Err(format!(
+                    "{} faces have texture coordinates but the mesh has {} faces",
+                    uv.triangles.len(),
+                    self.triangles.len()
+                ));
+            }
+            if let Some(i) = uv.coords.iter().position(|p| p.iter().any(|c| !c.is_finite())) {
+                return Err(format!("texture coordinate {} is not finite: {:?}", i + 1, uv.coords[i]));
+            }
+            let nt = uv.coords.len();
+            for (f, t) in uv.triangles.iter().enumerate() {
+                if let Some(&v) = t.iter().find(|&&v| v as usize >= nt) {
+                    return Err(format!(
+                        "face {} refers to texture coordinate {} but there are only {nt}",
+                        f + 1,
+                        v as usize + 1
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+pub(crate) fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+pub(crate) fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+pub(crate) fn norm(a: [f32; 3]) -> f32 {
+    (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn unit_right_triangle() -> TriMesh {
+        TriMesh {
+            positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+            triangles: vec![[0, 1, 2]],
+            uv: None,
+        }
+    }
+
+    #[test]
+    fn area_and_normal_of_a_right_triangle() {
+        let m = unit_right_triangle();
+        assert_eq!(m.face_area(0), 0.5);
+        assert_eq!(m.face_normal_scaled(0), [0.0, 0.0, 1.0]);
+    }
+
+    #[test]
+    fn validate_reports_out_of_range_and_nan() {
+        let mut m = unit_right_triangle();
+        assert!(m.validate().is_ok());
+        m.triangles[0][2] = 7;
+        assert!(m.validate().unwrap_err().contains("vertex 8"));
+        let mut m = unit_right_triangle();
+        m.positions[1][0] = f32::NAN;
+        assert!(m.validate().unwrap_err().contains("vertex 2"));
+    }
+}

@@ -1,0 +1,86 @@
+//! Wavefront OBJ reading (via `tobj`), with texture coordinates when the file has them.
+
+use std::path::Path;
+
+use crate::error::GeometryError;
+use crate::mesh::{TriMesh, UvLayer};
+
+/// Reads every object of an OBJ file into one triangle mesh, triangulating polygons. Texture
+/// coordinates are kept per corner when every face has them; a file where only some faces do is
+/// reported as malformed rather than silently mixed.
+pub fn load_obj(path: &Path) -> Result<TriMesh, GeometryError> {
+    let opts = tobj::LoadOptions { triangulate: true, single_index: false, ..Default::default() };
+    let (models, _materials) = tobj::load_obj(path, &opts).map_err(|e| match e {
+        tobj::LoadError::OpenFileFailed => GeometryError::Io {
+            path: path.to_path_buf(),
+            source: std::fs::metadata(path).err().unwrap_or_else(|| std::io::Error::other("cannot open")),
+        },
+        other => GeometryError::malformed(path, format!("not a valid OBJ file: {other}")),
+    })?;
+    let mut mesh = TriMesh::default();
+    let mut uv = UvLayer::default();
+    let mut faces_with_uv = 0usize;
+    for model in &models {
+        let m = &model.mesh;
+        let v0 = mesh.positions.len() as u32;
+        let t0 = uv.coords.len() as u32;
+        mesh.positions.extend(m.positions.chunks_exact(3).map(|c| [c[0], c[1], c[2]]));
+        uv.coords.extend(m.texcoords.chunks_exact(2).map(|c| [c[0], c[1]]));
+        mesh.triangles.extend(m.indices.chunks_exact(3).map(|c| [v0 + c[0], v0 + c[1], v0 + c[2]]));
+        if m.texcoord_indices.len() == m.indices.len() && !m.texcoord_indices.is_empty() {
+            faces_with_uv += m.indices.len() / 3;
+            uv.triangles
+                .extend(m.texcoord_indices.chunks_exact(3).map(|c| [t0 + c[0], t0 + c[1], t0 + c[2]]));
+        }
+    }
+    if faces_with_uv > 0 && faces_with_uv != mesh.triangles.len() {
+        return Err(GeometryError::malformed(
+            path,
+            format!(
+                "{faces_with_uv} of {} faces have texture coordinates; all or none must",
+                mesh.triangles.len()
+            ),
+        ));
+    }
+    if faces_with_uv > 0 {
+        mesh.uv = Some(uv);
+    }
+    if mesh.triangles.is_empty() {
+        return Err(GeometryError::invalid(path, "the mesh has no faces"));
+    }
+    mesh.validate().map_err(|m| GeometryError::invalid(path, m))?;
+    Ok(mesh)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write(name: &str, text: &str) -> std::path::PathBuf {
+        let dir = std::env::temp_dir().join(format!("nuvo-obj-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    }
+
+    #[test]
+    fn reads_quad_with_uvs_as_two_triangles() {
+        let p = write(
+            "quad.obj",
+            "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3 4/4\n",
+        );
+        let m = load_obj(&p).unwrap();
+        assert_eq!(m.triangles.len(), 2);
+        let uv = m.uv.as_ref().unwrap();
+        assert_eq!(uv.triangles.len(), 2);
+        assert_eq!(uv.coords.len(), 4);
+    }
+
+    #[test]
+    fn empty_file_is_an_error_naming_the_file() {
+        let p = write("empty.obj", "");
+        let e = load_obj(&p).unwrap_err().to_string();
+        assert!(e.contains("empty.obj"), "{e}");
+    }
+}

@@ -1,0 +1,4 @@
+//! The `nuvo` command line.
+fn main() {
+    println!("nuvo: work in progress");
+}
