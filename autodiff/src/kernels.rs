@@ -1,0 +1,282 @@
+//! Low-level kernels: GEMM through the `gemm` crate with strided (transposed) views, and parallel
+//! elementwise and reduction loops.
+//!
+//! Determinism invariant: every kernel here gives bit-identical results for the same inputs whatever
+//! the number of threads. Elementwise loops are trivially so; reductions split the rows into blocks of a
+//! fixed size (not a per-thread split), reduce each block in order in f64, and combine the blocks in
+//! order.
+
+use rayon::prelude::*;
+
+use crate::shape::Shape;
+
+/// Elementwise loops shorter than this run on one thread: below it the fork/join overhead dominates.
+pub(crate) const PAR_MIN_LEN: usize = 1 << 15;
+/// Chunk length of parallel elementwise loops.
+const PAR_CHUNK: usize = 1 << 13;
+/// Rows per block in reductions (fixed, so the summation order never depends on the thread count).
+const REDUCE_BLOCK_ROWS: usize = 512;
+
+/// A read-only matrix view with arbitrary strides, so transposes are free.
+#[derive(Clone, Copy)]
+pub(crate) struct MatRef<'a> {
+    pub data: &'a [f32],
+    pub rows: usize,
+    pub cols: usize,
+    pub row_stride: isize,
+    pub col_stride: isize,
+}
+
+impl<'a> MatRef<'a> {
+    /// A row-major view of `data` with `shape`.
+    pub fn new(data: &'a [f32], shape: Shape) -> Self {
+        debug_assert_eq!(data.len(), shape.len());
+        MatRef { data, rows: shape.rows, cols: shape.cols, row_stride: shape.cols as isize, col_stride: 1 }
+    }
+
+    /// The transposed view (no copy).
+    pub fn t(self) -> Self {
+        MatRef {
+            data: self.data,
+            rows: self.cols,
+            cols: self.rows,
+            row_stride: self.col_stride,
+            col_stride: self.row_stride,
+        }
+    }
+
+    /// The view, transposed when `transpose` is set.
+    pub fn maybe_t(self, transpose: bool) -> Self {
+        if transpose { self.t() } else { self }
+    }
+}
+
+/// `dst (m×n, row-major) = a·b` or, with `accumulate`, `dst += a·b`.
+///
+/// # Panics
+/// On inconsistent dimensions (a programming error).
+pub(crate) fn gemm(dst: &mut [f32], a: MatRef<'_>, b: MatRef<'_>, accumulate: bool) {
+    let (m, k, n) = (a.rows, a.cols, b.cols);
+    assert_eq!(k, b.rows, "gemm: inner dimensions {k} and {} differ", b.rows);
+    assert_eq!(dst.len(), m * n, "gemm: destination holds {} values, expected {m}×{n}", dst.len());
+    if m == 0 || n == 0 {
+        return;
+    }
+    if k == 0 {
+        if !accumulate {
+            dst.fill(0.0);
+        }
+        return;
+    }
+    let parallelism = if m * n * k >= 48 * 48 * 48 && rayon::current_num_threads() > 1 {
+        gemm::Parallelism::Rayon(0)
+    } else {
+        gemm::Parallelism::None
+    };
+    // SAFETY: the views' strides and extents were built from slices holding exactly rows×cols
+    // elements (checked above for dst and by construction for the MatRefs), so every address gemm
+    // touches is inside its slice; dst does not alias a or b because it is a distinct &mut.
+    unsafe {
+        gemm::gemm(
+            m,
+            n,
+            k,
+            dst.as_mut_ptr(),
+            1,
+            n as isize,
+            accumulate,
+            a.data.as_ptr(),
+            a.col_stride,
+            a.row_stride,
+            b.data.as_ptr(),
+            b.col_stride,
+            b.row_stride,
+            1.0,
+            1.0,
+            false,
+            false,
+            false,
+            parallelism,
+        );
+    }
+}
+
+/// `out[i] = f(x[i])`, in parallel for long slices.
+pub(crate) fn map1(out: &mut [f32], x: &[f32], f: impl Fn(f32) -> f32 + Sync) {
+    debug_assert_eq!(out.len(), x.len());
+    if out.len() >= PAR_MIN_LEN {
+        out.par_chunks_mut(PAR_CHUNK).zip(x.par_chunks(PAR_CHUNK)).for_each(|(o, x)| {
+            o.iter_mut().zip(x).for_each(|(o, &x)| *o = f(x));
+        });
+    } else {
+        out.iter_mut().zip(x).for_each(|(o, &x)| *o = f(x));
+    }
+}
+
+/// `out[i] = f(out[i], x[i])`, in parallel for long slices.
+pub(crate) fn update1(out: &mut [f32], x: &[f32], f: impl Fn(f32, f32) -> f32 + Sync) {
+    debug_assert_eq!(out.len(), x.len());
+    if out.len() >= PAR_MIN_LEN {
+        out.par_chunks_mut(PAR_CHUNK).zip(x.par_chunks(PAR_CHUNK)).for_each(|(o, x)| {
+            o.iter_mut().zip(x).for_each(|(o, &x)| *o = f(*o, x));
+        });
+    } else {
+        out.iter_mut().zip(x).for_each(|(o, &x)| *o = f(*o, x));
+    }
+}
+
+/// `out[i] = f(out[i], x[i], y[i])`, in parallel for long slices.
+pub(crate) fn update2(out: &mut [f32], x: &[f32], y: &[f32], f: impl Fn(f32, f32, f32) -> f32 + Sync) {
+    debug_assert!(out.len() == x.len() && out.len() == y.len());
+    if out.len() >= PAR_MIN_LEN {
+        out.par_chunks_mut(PAR_CHUNK).zip(x.par_chunks(PAR_CHUNK)).zip(y.par_chunks(PAR_CHUNK)).for_each(
+            |((o, x), y)| {
+                o.iter_mut().zip(x).zip(y).for_each(|((o, &x), &y)| *o = f(*o, x, y));
+            },
+        );
+    } else {
+        out.iter_mut().zip(x).zip(y).for_each(|((o, &x), &y)| *o = f(*o, x, y));
+    }
+}
+
+/// Calls `f(row_index, out_row)` for every row of `out` (`cols` wide), in parallel for large outputs.
+pub(crate) fn for_each_row(out: &mut [f32], cols: usize, f: impl Fn(usize, &mut [f32]) + Sync) {
+    if cols == 0 {
+        return;
+    }
+    if out.len() >= PAR_MIN_LEN {
+        let rows_per_chunk = (PAR_CHUNK / cols).max(1);
+        out.par_chunks_mut(rows_per_chunk * cols).enumerate().for_each(|(c, chunk)| {
+            for (r, row) in chunk.chunks_mut(cols).enumerate() {
+                f(c * rows_per_chunk + r, row);
+            }
+        });
+    } else {
+        out.chunks_mut(cols).enumerate().for_each(|(r, row)| f(r, row));
+    }
+}
+
+/// Per-column sums of a `rows × cols` matrix whose element `(r, c)` is `value(r, c)`, written (or
+/// added, with `accumulate`) into `dst` (length `cols`). Deterministic blocked summation in f64.
+pub(crate) fn column_sums(
+    dst: &mut [f32],
+    rows: usize,
+    cols: usize,
+    accumulate: bool,
+    value: impl Fn(usize, usize) -> f32 + Sync,
+) {
+    debug_assert_eq!(dst.len(), cols);
+    let block = |b: usize| {
+        let mut acc = vec![0.0f64; cols];
+        for r in b * REDUCE_BLOCK_ROWS..((b + 1) * REDUCE_BLOCK_ROWS).min(rows) {
+            for (c, a) in acc.iter_mut().enumerate() {
+                *a += value(r, c) as f64;
+            }
+        }
+        acc
+    };
+    let blocks = rows.div_ceil(REDUCE_BLOCK_ROWS);
+    let partials: Vec<Vec<f64>> = if rows * cols >= PAR_MIN_LEN {
+        (0..blocks).into_par_iter().map(block).collect()
+    } else {
+        (0..blocks).map(block).collect()
+    };
+    for (c, d) in dst.iter_mut().enumerate() {
+        let s: f64 = partials.iter().map(|p| p[c]).sum();
+        *d = if accumulate { *d + s as f32 } else { s as f32 };
+    }
+}
+
+/// Per-row sums of `value(r, c)` over `c`, written (or added) into `dst` (length `rows`).
+pub(crate) fn row_sums(
+    dst: &mut [f32],
+    cols: usize,
+    accumulate: bool,
+    value: impl Fn(usize, usize) -> f32 + Sync,
+) {
+    for_each_row(dst, 1, |r, d| {
+        let s: f64 = (0..cols).map(|c| value(r, c) as f64).sum();
+        d[0] = if accumulate { d[0] + s as f32 } else { s as f32 };
+    });
+}
+
+/// The sum of `value(r, c)` over a whole `rows × cols` matrix, deterministic, in f64.
+pub(crate) fn total_sum(rows: usize, cols: usize, value: impl Fn(usize, usize) -> f32 + Sync) -> f64 {
+    let block = |b: usize| -> f64 {
+        let mut acc = 0.0f64;
+        for r in b * REDUCE_BLOCK_ROWS..((b + 1) * REDUCE_BLOCK_ROWS).min(rows) {
+            for c in 0..cols {
+                acc += value(r, c) as f64;
+            }
+        }
+        acc
+    };
+    let blocks = rows.div_ceil(REDUCE_BLOCK_ROWS);
+    if rows * cols >= PAR_MIN_LEN {
+        let partials: Vec<f64> = (0..blocks).into_par_iter().map(block).collect();
+        partials.iter().sum()
+    } else {
+        (0..blocks).map(block).sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn naive(a: MatRef<'_>, b: MatRef<'_>) -> Vec<f32> {
+        let at = |m: MatRef<'_>, r: usize, c: usize| {
+            m.data[(r as isize * m.row_stride + c as isize * m.col_stride) as usize]
+        };
+        let mut out = vec![0.0; a.rows * b.cols];
+        for i in 0..a.rows {
+            for j in 0..b.cols {
+                out[i * b.cols + j] = (0..a.cols).map(|k| at(a, i, k) * at(b, k, j)).sum();
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn gemm_matches_naive_for_all_transpose_combinations_and_accumulates() {
+        let (m, k, n) = (70, 33, 65);
+        let a: Vec<f32> = (0..m * k).map(|i| ((i * 7 % 13) as f32 - 6.0) / 5.0).collect();
+        let b: Vec<f32> = (0..k * n).map(|i| ((i * 5 % 11) as f32 - 5.0) / 4.0).collect();
+        for ta in [false, true] {
+            for tb in [false, true] {
+                let av = if ta {
+                    MatRef::new(&a, Shape::new(k, m)).t()
+                } else {
+                    MatRef::new(&a, Shape::new(m, k))
+                };
+                let bv = if tb {
+                    MatRef::new(&b, Shape::new(n, k)).t()
+                } else {
+                    MatRef::new(&b, Shape::new(k, n))
+                };
+                let want = naive(av, bv);
+                let mut got = vec![1.0; m * n];
+                gemm(&mut got, av, bv, false);
+                for (g, w) in got.iter().zip(&want) {
+                    assert!((g - w).abs() < 1e-3, "{g} vs {w}");
+                }
+                gemm(&mut got, av, bv, true);
+                for (g, w) in got.iter().zip(&want) {
+                    assert!((g - 2.0 * w).abs() < 2e-3);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn reductions_are_exact_on_integers() {
+        let rows = 2000;
+        let cols = 3;
+        let mut cs = vec![0.0; cols];
+        column_sums(&mut cs, rows, cols, false, |r, c| (r % 7 + c) as f32);
+        let want: Vec<f32> = (0..cols).map(|c| (0..rows).map(|r| (r % 7 + c) as f32).sum()).collect();
+        assert_eq!(cs, want);
+        let total = total_sum(rows, cols, |r, c| (r % 7 + c) as f32);
+        assert_eq!(total as f32, want.iter().sum::<f32>());
+    }
+}
