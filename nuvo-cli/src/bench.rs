@@ -1,0 +1,130 @@
+//! `nuvo bench`: speed of the engine, reported in ms/step and GFLOP/s.
+//!
+//! FLOP accounting: a `B×i · i×o` product is `2·B·i·o` FLOPs. An MLP step (forward + backward) is
+//! counted as 3× the forward FLOPs minus the first layer's input gradient, which is never computed
+//! because the input needs no gradient (PyTorch skips it too).
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use nuvo_autodiff::nn::{Mlp, MlpConfig};
+use nuvo_autodiff::optim::{Adam, AdamConfig};
+use nuvo_autodiff::{Activation, ParamStore, Shape, Tape, Tensor};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+#[derive(clap::Args)]
+pub struct BenchArgs {
+    /// What to measure.
+    #[arg(value_enum, default_value = "all")]
+    what: What,
+    /// Rows per batch.
+    #[arg(long, default_value_t = 4096)]
+    batch: usize,
+    /// Timed iterations per case (after 3 warm-up iterations).
+    #[arg(long, default_value_t = 20)]
+    iters: usize,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum, PartialEq)]
+enum What {
+    All,
+    Mlp,
+    Gemm,
+}
+
+pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
+    println!("threads: {}", rayon::current_num_threads());
+    if matches!(args.what, What::All | What::Gemm) {
+        gemm_cases(args);
+    }
+    if matches!(args.what, What::All | What::Mlp) {
+        for (depth, width) in [(8, 256), (4, 128)] {
+            mlp_case(args, depth, width)?;
+        }
+    }
+    Ok(())
+}
+
+/// Median and minimum of `iters` timed runs of `f` after 3 warm-ups, in seconds.
+fn time(iters: usize, mut f: impl FnMut()) -> (f64, f64) {
+    for _ in 0..3 {
+        f();
+    }
+    let mut t: Vec<f64> = (0..iters.max(1))
+        .map(|_| {
+            let s = Instant::now();
+            f();
+            s.elapsed().as_secs_f64()
+        })
+        .collect();
+    t.sort_by(f64::total_cmp);
+    (t[t.len() / 2], t[0])
+}
+
+fn report(name: &str, flops: f64, (median, min): (f64, f64)) {
+    println!(
+        "{name:<44} median {:>8.2} ms  min {:>8.2} ms  {:>6.1} GFLOP/s (median)  {:>6.1} GFLOP/s (best)",
+        median * 1e3,
+        min * 1e3,
+        flops / median / 1e9,
+        flops / min / 1e9
+    );
+}
+
+fn gemm_cases(args: &BenchArgs) {
+    let (b, n) = (args.batch, 256);
+    let fill = |r, c| {
+        Tensor::from_vec(r, c, (0..r * c).map(|i| ((i * 7919 % 1000) as f32 - 500.0) / 1000.0).collect())
+    };
+    let (x, w, dy) = (fill(b, n), fill(n, n), fill(b, n));
+    let flops = 2.0 * (b * n * n) as f64;
+    let mut tape = Tape::default();
+    let mut bench = |name: &str, ta: bool, tb: bool, lhs: &Tensor, rhs: &Tensor| {
+        let t = time(args.iters, || {
+            tape.reset();
+            let a = tape.input(lhs);
+            let c = tape.input(rhs);
+            tape.matmul_t(a, c, ta, tb);
+        });
+        report(name, flops, t);
+    };
+    bench(&format!("gemm Y = X·W        ({b}×{n} · {n}×{n})"), false, false, &x, &w);
+    bench(&format!("gemm dW = Xᵀ·dY     ({n}×{b} · {b}×{n})"), true, false, &x, &dy);
+    bench(&format!("gemm dX = dY·Wᵀ     ({b}×{n} · {n}×{n})"), false, true, &dy, &w);
+}
+
+fn mlp_case(args: &BenchArgs, depth: usize, width: usize) -> anyhow::Result<()> {
+    let b = args.batch;
+    let (in_dim, out_dim) = (27, 3);
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    let mut params = ParamStore::new();
+    let cfg = MlpConfig { depth, width, activation: Activation::Relu };
+    let mlp = Mlp::new(&mut params, "m", "mlp", in_dim, out_dim, &cfg, Activation::Identity, &mut rng);
+    let mut adam = Adam::new(&params, AdamConfig::default(), &BTreeMap::from([("mlp".to_owned(), 1e-4)]))?;
+    let x = Tensor::from_vec(
+        b,
+        in_dim,
+        (0..b * in_dim).map(|i| ((i * 31 % 200) as f32 - 100.0) / 100.0).collect(),
+    );
+    let mut tape = Tape::new(params);
+    let fwd_flops = 2.0 * (b * mlp.macs_per_row()) as f64;
+    let step_flops = 3.0 * fwd_flops - 2.0 * (b * in_dim * width) as f64;
+    let mut step = |with_adam: bool| {
+        tape.reset();
+        tape.params_mut().zero_grads();
+        let xv = tape.input_with(Shape::new(b, in_dim), |d| d.copy_from_slice(x.data()));
+        let y = mlp.forward(&mut tape, xv);
+        let sq = tape.square(y);
+        let loss = tape.mean_all(sq);
+        tape.backward(loss);
+        if with_adam {
+            adam.step(tape.params_mut(), 1.0);
+        }
+    };
+    let name = format!("mlp {depth}×{width} fwd+bwd, batch {b}");
+    report(&name, step_flops, time(args.iters, || step(false)));
+    let name = format!("mlp {depth}×{width} fwd+bwd+adam, batch {b}");
+    report(&name, step_flops, time(args.iters, || step(true)));
+    Ok(())
+}
