@@ -98,7 +98,9 @@ pub fn check_gradients(
             let numeric = ((up - down) / (2.0 * cfg.step as f64)) as f32;
             let a = analytic[k][e];
             let tol = cfg.atol + cfg.rtol * a.abs().max(numeric.abs());
-            if !((a - numeric).abs() <= tol) {
+            // A NaN on either side makes `agrees` false: it counts as a mismatch.
+            let agrees = (a - numeric).abs() <= tol;
+            if !agrees {
                 mismatches.push(Mismatch { input: k, element: e, analytic: a, numeric });
             }
         }

@@ -53,12 +53,14 @@ impl Linear {
     }
 }
 
-/// Shape of an [`Mlp`]: `depth` hidden layers of `width` units with `activation`, then a linear output
-/// layer with `output_activation`. Nuvo's paper uses depth 8, width 256, ReLU.
+/// Shape of an [`Mlp`]: `depth` fully-connected layers in all, the first `depth − 1` of them `width`
+/// units wide with `activation`, the last mapping to the output with the output activation. This is
+/// how the paper counts: its "8 fully-connected layers, each with 256 channels" is depth 8, width 256
+/// (seven hidden ReLU layers and the output layer).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MlpConfig {
-    /// Number of hidden layers (each `width` wide). 0 gives a single affine map.
+    /// Number of fully-connected layers, at least 1 (1 is a single affine map).
     pub depth: usize,
     /// Units per hidden layer.
     pub width: usize,
@@ -147,11 +149,11 @@ mod tests {
 
     #[test]
     fn same_seed_same_weights_and_shapes_chain() {
-        let cfg = MlpConfig { depth: 3, width: 16, activation: Activation::Relu };
+        let cfg = MlpConfig { depth: 4, width: 16, activation: Activation::Relu };
         let build = |seed| {
             let mut p = ParamStore::new();
             let mut rng = ChaCha8Rng::seed_from_u64(seed);
-            let m = Mlp::new(&mut p, "m", "mlp", 5, 2, &cfg, Activation::Sigmoid, &mut rng);
+            let m = Mlp::new(&mut p, "m", "mlp", &cfg, (5, 2, Activation::Sigmoid), &mut rng);
             (m, p)
         };
         let (m, p1) = build(7);

@@ -28,7 +28,8 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
     let mut params = ParamStore::new();
     let cfg = MlpConfig { depth: 4, width: 128, activation: Activation::Relu };
-    let mlp = Mlp::new(&mut params, "f", "mlp", posenc_width(2, 3), 1, &cfg, Activation::Identity, &mut rng);
+    let mlp =
+        Mlp::new(&mut params, "f", "mlp", &cfg, (posenc_width(2, 3), 1, Activation::Identity), &mut rng);
     let mut adam = Adam::new(&params, AdamConfig::default(), &BTreeMap::from([("mlp".to_owned(), 2e-3)]))?;
     let schedule = CosineSchedule { total_steps: args.steps, warmup_steps: 0, final_factor: 0.02 };
     let mut tape = Tape::new(params);
