@@ -82,32 +82,31 @@ pub struct Mlp {
 }
 
 impl Mlp {
-    /// Registers the layers as `{name}.l0`, `{name}.l1`, … in `params`.
+    /// Registers the layers as `{name}.l0`, `{name}.l1`, … in `params` (group `group`). `io` is
+    /// `(input width, output width, output activation)`.
+    ///
+    /// # Panics
+    /// If `cfg.depth` is 0 (configs are validated before models are built).
     pub fn new(
         params: &mut ParamStore,
         name: &str,
         group: &str,
-        in_dim: usize,
-        out_dim: usize,
         cfg: &MlpConfig,
-        output: Activation,
+        io: (usize, usize, Activation),
         rng: &mut impl Rng,
     ) -> Self {
-        let mut layers = Vec::with_capacity(cfg.depth + 1);
+        let (in_dim, out_dim, output) = io;
+        assert!(cfg.depth >= 1, "an MLP needs at least one layer");
+        let mut layers = Vec::with_capacity(cfg.depth);
         let mut d = in_dim;
-        for l in 0..cfg.depth {
-            layers.push(Linear::new(
-                params,
-                &format!("{name}.l{l}"),
-                group,
-                d,
-                cfg.width,
-                cfg.activation,
-                rng,
-            ));
+        for l in 0..cfg.depth - 1 {
+            let layer =
+                Linear::new(params, &format!("{name}.l{l}"), group, d, cfg.width, cfg.activation, rng);
+            layers.push(layer);
             d = cfg.width;
         }
-        layers.push(Linear::new(params, &format!("{name}.l{}", cfg.depth), group, d, out_dim, output, rng));
+        let last = cfg.depth - 1;
+        layers.push(Linear::new(params, &format!("{name}.l{last}"), group, d, out_dim, output, rng));
         Mlp { layers, hidden: cfg.activation, output }
     }
 

@@ -23,17 +23,9 @@ impl Fit {
     fn new(seed: u64) -> Self {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let mut params = ParamStore::new();
-        let cfg = MlpConfig { depth: 3, width: 64, activation: Activation::Relu };
-        let mlp = Mlp::new(
-            &mut params,
-            "f",
-            "mlp",
-            nuvo_autodiff::posenc_width(2, 2),
-            1,
-            &cfg,
-            Activation::Identity,
-            &mut rng,
-        );
+        let cfg = MlpConfig { depth: 4, width: 64, activation: Activation::Relu };
+        let io = (nuvo_autodiff::posenc_width(2, 2), 1, Activation::Identity);
+        let mlp = Mlp::new(&mut params, "f", "mlp", &cfg, io, &mut rng);
         let adam =
             Adam::new(&params, AdamConfig::default(), &BTreeMap::from([("mlp".to_owned(), 3e-3)])).unwrap();
         Fit { tape: Tape::new(params), mlp, adam, rng }
