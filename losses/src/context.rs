@@ -1,0 +1,246 @@
+//! The per-step context: the batch, and every network output a loss may read, computed once.
+//!
+//! Losses ask for quantities (`c(x)`, `t_i(x)`, `s_i(u)`, …) through getters. The first request
+//! records the evaluation on the tape and caches the [`Var`]; later requests, from the same or another
+//! loss, get the cached one. So however many losses read `t_i(x)`, each network runs once per input.
+
+use nuvo_autodiff::{Shape, Tape, Var};
+
+use crate::networks::Networks;
+
+/// The raw data of one step. Invariant: `points`, `normals`, `tangents_p` and `tangents_q` have the
+/// same length; `(tangents_p[k], tangents_q[k], normals[k])` is an orthonormal frame.
+#[derive(Clone, Copy, Debug)]
+pub struct StepData<'a> {
+    /// Surface samples `x` in the model frame.
+    pub points: &'a [[f32; 3]],
+    /// Unit normals at the samples.
+    pub normals: &'a [[f32; 3]],
+    /// Random UV points `u`, uniform in `[0, 1]²`, shared by every chart.
+    pub uv: &'a [[f32; 2]],
+    /// First random unit tangent `p` at each sample.
+    pub tangents_p: &'a [[f32; 3]],
+    /// Second unit tangent `q = n × p`.
+    pub tangents_q: &'a [[f32; 3]],
+    /// Finite-difference step `ε` of the distortion losses (the paper uses 1e-2).
+    pub epsilon: f32,
+}
+
+#[derive(Default)]
+struct Cache {
+    x: Option<Var>,
+    normals: Option<Var>,
+    uv: Option<Var>,
+    offsets: Option<(Var, Var)>,
+    chart_logits: Option<Var>,
+    chart_probs: Option<Var>,
+    tex: Vec<Option<Var>>,
+    tex_offsets: Vec<Option<(Var, Var)>>,
+    differentials: Vec<Option<(Var, Var)>>,
+    cycle_points: Vec<Option<Var>>,
+    surface_points: Vec<Option<Var>>,
+    cycle_uv: Vec<Option<Var>>,
+    all_surface_points: Option<Var>,
+    chart_log_probs_at_surface: Option<Var>,
+    sigma: Option<Var>,
+    grids: Vec<Option<(Var, usize)>>,
+}
+
+/// Shared forward results of one step. See the module docs.
+pub struct StepContext<'a> {
+    /// The tape the step records on. Losses record their own arithmetic here.
+    pub tape: &'a mut Tape,
+    nets: &'a dyn Networks,
+    data: StepData<'a>,
+    cache: Cache,
+}
+
+macro_rules! cached {
+    ($self:ident . $field:ident, $compute:expr) => {{
+        if let Some(v) = $self.cache.$field {
+            return v;
+        }
+        let v = $compute;
+        $self.cache.$field = Some(v);
+        v
+    }};
+    ($self:ident . $field:ident [$i:expr], $compute:expr) => {{
+        if let Some(v) = $self.cache.$field[$i] {
+            return v;
+        }
+        let v = $compute;
+        $self.cache.$field[$i] = Some(v);
+        v
+    }};
+}
+
+fn rows3(tape: &mut Tape, rows: &[[f32; 3]]) -> Var {
+    tape.input_with(Shape::new(rows.len(), 3), |d| d.copy_from_slice(rows.as_flattened()))
+}
+
+impl<'a> StepContext<'a> {
+    /// A context for one step.
+    pub fn new(tape: &'a mut Tape, nets: &'a dyn Networks, data: StepData<'a>) -> Self {
+        let n = nets.charts();
+        let cache = Cache {
+            tex: vec![None; n],
+            tex_offsets: vec![None; n],
+            differentials: vec![None; n],
+            cycle_points: vec![None; n],
+            surface_points: vec![None; n],
+            cycle_uv: vec![None; n],
+            grids: vec![None; n],
+            ..Cache::default()
+        };
+        StepContext { tape, nets, data, cache }
+    }
+
+    /// Number of charts.
+    pub fn charts(&self) -> usize {
+        self.nets.charts()
+    }
+
+    /// The raw step data.
+    pub fn data(&self) -> &StepData<'a> {
+        &self.data
+    }
+
+    /// Number of 3-D samples `|G|`.
+    pub fn batch_3d(&self) -> usize {
+        self.data.points.len()
+    }
+
+    /// Number of UV samples `|T|`.
+    pub fn batch_uv(&self) -> usize {
+        self.data.uv.len()
+    }
+
+    /// The samples `x` (`B×3`, constant).
+    pub fn x(&mut self) -> Var {
+        cached!(self.x, rows3(self.tape, self.data.points))
+    }
+
+    /// Their normals `n(x)` (`B×3`, constant).
+    pub fn normals(&mut self) -> Var {
+        cached!(self.normals, rows3(self.tape, self.data.normals))
+    }
+
+    /// The UV samples `u` (`|T|×2`, constant).
+    pub fn uv(&mut self) -> Var {
+        cached!(
+            self.uv,
+            self.tape.input_with(Shape::new(self.data.uv.len(), 2), |d| d
+                .copy_from_slice(self.data.uv.as_flattened()))
+        )
+    }
+
+    /// `c(x)` as logits (`B×n`).
+    pub fn chart_logits(&mut self) -> Var {
+        cached!(self.chart_logits, {
+            let x = self.x();
+            self.nets.chart_logits(self.tape, x)
+        })
+    }
+
+    /// `c(x)`, the chart probabilities (`B×n`, rows sum to 1).
+    pub fn chart_probs(&mut self) -> Var {
+        cached!(self.chart_probs, {
+            let l = self.chart_logits();
+            self.tape.softmax(l)
+        })
+    }
+
+    /// `t_i(x)` (`B×2`).
+    pub fn tex(&mut self, i: usize) -> Var {
+        cached!(self.tex[i], {
+            let x = self.x();
+            self.nets.texture(self.tape, i, x)
+        })
+    }
+
+    /// The offset points `(x + εp, x + εq)` (constants).
+    fn offsets(&mut self) -> (Var, Var) {
+        cached!(self.offsets, {
+            let d = self.data;
+            let shifted = |t: &[[f32; 3]]| -> Vec<[f32; 3]> {
+                d.points
+                    .iter()
+                    .zip(t)
+                    .map(|(x, t)| std::array::from_fn(|k| x[k] + d.epsilon * t[k]))
+                    .collect()
+            };
+            let (p, q) = (shifted(d.tangents_p), shifted(d.tangents_q));
+            (rows3(self.tape, &p), rows3(self.tape, &q))
+        })
+    }
+
+    /// `(t_i(x + εp), t_i(x + εq))`.
+    pub fn tex_at_offsets(&mut self, i: usize) -> (Var, Var) {
+        cached!(self.tex_offsets[i], {
+            let (xp, xq) = self.offsets();
+            (self.nets.texture(self.tape, i, xp), self.nets.texture(self.tape, i, xq))
+        })
+    }
+
+    /// The paper's UV vectors `D t_i(εp) ≈ t_i(x + εp) − t_i(x)` and `D t_i(εq)` (`B×2` each): the
+    /// finite-difference images of the tangent vectors `εp` and `εq` (not divided by `ε`).
+    pub fn uv_differentials(&mut self, i: usize) -> (Var, Var) {
+        cached!(self.differentials[i], {
+            let t = self.tex(i);
+            let (tp, tq) = self.tex_at_offsets(i);
+            (self.tape.sub(tp, t), self.tape.sub(tq, t))
+        })
+    }
+
+    /// `s_i(t_i(x))`, the 3→2→3 round trip (`B×3`).
+    pub fn cycle_points(&mut self, i: usize) -> Var {
+        cached!(self.cycle_points[i], {
+            let t = self.tex(i);
+            self.nets.surface(self.tape, i, t)
+        })
+    }
+
+    /// `s_i(u)` (`|T|×3`).
+    pub fn surface_points(&mut self, i: usize) -> Var {
+        cached!(self.surface_points[i], {
+            let u = self.uv();
+            self.nets.surface(self.tape, i, u)
+        })
+    }
+
+    /// `⋃_i s_i(T)`: every chart's surface points stacked, chart 0 first (`n|T|×3`).
+    pub fn all_surface_points(&mut self) -> Var {
+        cached!(self.all_surface_points, {
+            let parts: Vec<Var> = (0..self.charts()).map(|i| self.surface_points(i)).collect();
+            if parts.len() == 1 { parts[0] } else { self.tape.concat_rows(&parts) }
+        })
+    }
+
+    /// `t_i(s_i(u))`, the 2→3→2 round trip (`|T|×2`).
+    pub fn cycle_uv(&mut self, i: usize) -> Var {
+        cached!(self.cycle_uv[i], {
+            let s = self.surface_points(i);
+            self.nets.texture(self.tape, i, s)
+        })
+    }
+
+    /// `log c(s_i(u))` for every chart's surface points, stacked like [`Self::all_surface_points`]
+    /// (`n|T|×n`). One chart-network evaluation covers all charts.
+    pub fn chart_log_probs_at_surface_points(&mut self) -> Var {
+        cached!(self.chart_log_probs_at_surface, {
+            let s = self.all_surface_points();
+            let l = self.nets.chart_logits(self.tape, s);
+            self.tape.log_softmax(l)
+        })
+    }
+
+    /// The learned average stretch `σ`.
+    pub fn sigma(&mut self) -> Var {
+        cached!(self.sigma, self.nets.sigma(self.tape))
+    }
+
+    /// The normal grid `N_i` and its resolution.
+    pub fn normal_grid(&mut self, i: usize) -> (Var, usize) {
+        cached!(self.grids[i], self.nets.normal_grid(self.tape, i))
+    }
+}
