@@ -69,6 +69,30 @@ impl Adam {
         self.steps
     }
 
+    /// The first and second moment estimates, per parameter in registration order (for checkpoints).
+    pub fn moments(&self) -> (&[Vec<f32>], &[Vec<f32>]) {
+        (&self.m, &self.v)
+    }
+
+    /// Restores a saved state (from [`Adam::moments`] and [`Adam::steps`]). Fails, changing nothing,
+    /// if the moments do not match the parameters this optimiser was built for.
+    pub fn restore(&mut self, steps: u64, m: Vec<Vec<f32>>, v: Vec<Vec<f32>>) -> Result<(), String> {
+        let fits = |x: &[Vec<f32>]| {
+            x.len() == self.m.len() && x.iter().zip(&self.m).all(|(a, b)| a.len() == b.len())
+        };
+        if !fits(&m) || !fits(&v) {
+            return Err(format!(
+                "optimiser state holds {} tensors whose sizes do not match the model's {}",
+                m.len(),
+                self.m.len()
+            ));
+        }
+        self.steps = steps;
+        self.m = m;
+        self.v = v;
+        Ok(())
+    }
+
     /// One update of every parameter from its accumulated gradient, each group's learning rate
     /// multiplied by `lr_factor` (the schedule). Parameters are updated in parallel; each update is
     /// elementwise, so the result does not depend on the thread count.

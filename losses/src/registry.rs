@@ -93,7 +93,7 @@ pub fn no_options(loss: &str, options: &toml::Table) -> Result<(), LossError> {
         None => Ok(()),
         Some(k) => Err(LossError::Options {
             loss: loss.to_owned(),
-            message: format!("unknown option `{k}`; this loss takes no options besides `weight`"),
+            message: format!("unknown field `{k}`; this loss takes no options besides `weight`"),
         }),
     }
 }

@@ -1,1 +1,25 @@
-//! Placeholder: see ARCHITECTURE.md.
+//! `nuvo-core`: the Nuvo model, experiment configs, the trainer and training runs.
+//!
+//! - [`config`]: the TOML experiment config with `--set` overrides and located errors;
+//! - [`model`]: the `2n + 1` networks, `σ` and the normal grids;
+//! - [`trainer`]: one deterministic optimisation step at a time;
+//! - [`run`]: the output folder, checkpoints, log, resume, budget and NaN rollback;
+//! - [`checkpoint`]: the safetensors checkpoint format.
+//!
+//! Geometry sources and losses come from registries ([`nuvo_geometry::SourceRegistry`],
+//! [`nuvo_losses::LossRegistry`]), so an application can add its own before building a [`Trainer`].
+
+pub mod atomic;
+pub mod batch;
+pub mod checkpoint;
+pub mod config;
+pub mod model;
+pub mod run;
+pub mod seeds;
+pub mod trainer;
+
+pub use checkpoint::{Checkpoint, CheckpointError};
+pub use config::{ConfigError, ExperimentConfig, LoadedConfig};
+pub use model::NuvoModel;
+pub use run::{Observer, RunOptions, RunSummary, run};
+pub use trainer::{StepOutcome, TrainError, Trainer};

@@ -1,0 +1,607 @@
+//! Experiment configs: the TOML file a researcher writes, plus `--set key=value` overrides, checked
+//! with errors that name the file, the line, the key and the valid choices.
+//!
+//! Loading happens in three stages, each with its own error:
+//! 1. the text must be TOML (syntax errors come with toml's line and snippet);
+//! 2. overrides are applied to the parsed tree and the tree is deserialised into [`ExperimentConfig`]
+//!    (`deny_unknown_fields` everywhere; serde reports the key path, which [`ConfigSource::locate`]
+//!    turns back into a line of the file);
+//! 3. [`ExperimentConfig::validate`] checks ranges (positive sizes, finite rates, ...).
+//!
+//! Relative input paths in the file (e.g. `geometry.path`) resolve against the file's folder; those
+//! given with `--set` resolve against the working directory. `output.dir` resolves against the
+//! working directory.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+use nuvo_autodiff::Activation;
+use serde::{Deserialize, Serialize};
+
+/// The whole experiment.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExperimentConfig {
+    /// Seeds initialisation and every random draw; same config + seed = same atlas.
+    #[serde(default)]
+    pub seed: u64,
+    /// The scene.
+    pub geometry: GeometryConfig,
+    /// The networks.
+    #[serde(default)]
+    pub model: ModelConfig,
+    /// Batch sizes, steps, budget, checkpoints.
+    #[serde(default)]
+    pub training: TrainingConfig,
+    /// Adam and its schedule.
+    #[serde(default)]
+    pub optimizer: OptimizerConfig,
+    /// The loss terms, one table each. Absent: every built-in loss at its paper weight. Present:
+    /// exactly the listed terms (removing an entry, or a weight of 0, is an ablation).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub losses: Option<BTreeMap<String, LossConfig>>,
+    /// Where results go.
+    #[serde(default)]
+    pub output: OutputConfig,
+}
+
+/// `[geometry]`: which registered source, and its own options (checked by the source itself).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GeometryConfig {
+    /// Registered source name: `mesh`, `point_cloud`, `density`, or a plugin's.
+    pub source: String,
+    /// Every other key of the table, handed to the source's builder.
+    #[serde(flatten)]
+    pub options: toml::Table,
+}
+
+/// `[model]`: the `2n + 1` networks. Per-network tables override depth, width and encoding degree.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ModelConfig {
+    /// Number of charts `n`.
+    pub charts: usize,
+    /// Fully-connected layers per network (the paper: 8).
+    pub depth: usize,
+    /// Channels per hidden layer (the paper: 256).
+    pub width: usize,
+    /// Hidden activation.
+    pub activation: Activation,
+    /// Overrides for the chart-assignment network `c` (encoding degree 1 by default).
+    pub chart: NetworkOverrides,
+    /// Overrides for the texture-coordinate networks `t_i` (encoding degree 4 by default).
+    pub texture: NetworkOverrides,
+    /// Overrides for the surface-coordinate networks `s_i` (encoding degree 4 by default).
+    pub surface: NetworkOverrides,
+    /// Texels per side of each normal grid `N_i`; default `256·√(2/n)` (the paper's texture budget).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub grid_resolution: Option<usize>,
+    /// Initial value of the learned average stretch `σ`.
+    pub sigma_init: f32,
+}
+
+impl Default for ModelConfig {
+    fn default() -> Self {
+        ModelConfig {
+            charts: 1,
+            depth: 8,
+            width: 256,
+            activation: Activation::Relu,
+            chart: NetworkOverrides::default(),
+            texture: NetworkOverrides::default(),
+            surface: NetworkOverrides::default(),
+            grid_resolution: None,
+            sigma_init: 1.0,
+        }
+    }
+}
+
+/// Per-network overrides; unset fields fall back to `[model]`'s.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct NetworkOverrides {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub depth: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub width: Option<usize>,
+    /// Positional-encoding degree.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub posenc: Option<usize>,
+}
+
+/// `[training]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrainingConfig {
+    /// Optimisation steps; the cosine schedule spans them.
+    pub steps: u64,
+    /// 3-D surface samples per step `|G|`.
+    pub batch_3d: usize,
+    /// UV samples per step `|T|`.
+    pub batch_uv: usize,
+    /// Stop early after this many minutes of training (results then depend on the machine's speed).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub time_budget_minutes: Option<f64>,
+    /// Finite-difference step of the distortion losses, in the model frame (the paper: 1e-2).
+    pub epsilon: f32,
+    /// Write a checkpoint every this many steps (and at the end).
+    pub checkpoint_every: u64,
+    /// After this many consecutive steps skipped for NaN/inf, roll back to the last checkpoint.
+    pub max_bad_steps: u32,
+}
+
+impl Default for TrainingConfig {
+    fn default() -> Self {
+        TrainingConfig {
+            steps: 2000,
+            batch_3d: 5000,
+            batch_uv: 5000,
+            time_budget_minutes: None,
+            epsilon: 1e-2,
+            checkpoint_every: 250,
+            max_bad_steps: 20,
+        }
+    }
+}
+
+/// `[optimizer]`: Adam with per-group learning rates (the paper's by default) and cosine decay.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct OptimizerConfig {
+    /// Learning rate of every MLP parameter (the paper: 1e-4).
+    pub lr_mlp: f32,
+    /// Learning rate of σ (the paper: 0.1).
+    pub lr_sigma: f32,
+    /// Learning rate of the normal grids (the paper: 0.04).
+    pub lr_grid: f32,
+    pub beta1: f32,
+    pub beta2: f32,
+    pub eps: f32,
+    /// Linear warm-up steps before the cosine decay.
+    pub warmup_steps: u64,
+    /// The schedule decays every rate to this fraction of its start (the paper: 0).
+    pub final_lr_factor: f32,
+}
+
+impl Default for OptimizerConfig {
+    fn default() -> Self {
+        OptimizerConfig {
+            lr_mlp: 1e-4,
+            lr_sigma: 0.1,
+            lr_grid: 0.04,
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-8,
+            warmup_steps: 0,
+            final_lr_factor: 0.0,
+        }
+    }
+}
+
+/// `[losses.NAME]`: the weight, plus the loss's own options (checked by the loss).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LossConfig {
+    /// Weight of the term; absent means the registry's default (the paper's weight).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub weight: Option<f32>,
+    /// Every other key, handed to the loss's builder.
+    #[serde(flatten)]
+    pub options: toml::Table,
+}
+
+/// `[output]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct OutputConfig {
+    /// Output folder (relative to the working directory).
+    pub dir: PathBuf,
+}
+
+impl Default for OutputConfig {
+    fn default() -> Self {
+        OutputConfig { dir: PathBuf::from("runs/nuvo") }
+    }
+}
+
+/// A config that failed to load, with where and why.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("cannot read config {path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// Not TOML; toml's message carries the line and a snippet.
+    #[error("{path} is not valid TOML: {message}")]
+    Syntax { path: PathBuf, message: String },
+    /// A key is unknown, mistyped or out of range.
+    #[error("{location}: {message}")]
+    Invalid { location: String, message: String },
+    /// A `--set` argument is malformed.
+    #[error("--set {arg}: {message}")]
+    Override { arg: String, message: String },
+}
+
+/// Where a config came from, for locating keys in error messages and resolving relative paths.
+#[derive(Clone, Debug)]
+pub struct ConfigSource {
+    /// The file.
+    pub path: PathBuf,
+    text: String,
+    /// Dotted keys set with `--set`.
+    overridden: BTreeSet<String>,
+}
+
+impl ConfigSource {
+    /// A source for text that did not come from a file (tests, programmatic configs).
+    pub fn in_memory(name: &str, text: &str) -> Self {
+        ConfigSource { path: PathBuf::from(name), text: text.to_owned(), overridden: BTreeSet::new() }
+    }
+
+    /// Human-readable location of a dotted key: `file line N, key \`a.b\``, or a note that it was set
+    /// on the command line.
+    pub fn locate(&self, key: &str) -> String {
+        let file = self.path.display();
+        if self.overridden.iter().any(|o| key == o || key.starts_with(&format!("{o}."))) {
+            return format!("{file}, key `{key}` (set with --set)");
+        }
+        match key_line(&self.text, key) {
+            Some(line) => format!("{file} line {line}, key `{key}`"),
+            None => format!("{file}, key `{key}`"),
+        }
+    }
+
+    /// Folder that relative paths written in the file resolve against.
+    pub fn base_dir(&self) -> PathBuf {
+        self.path.parent().map(Path::to_path_buf).unwrap_or_default()
+    }
+
+    /// Whether `key` was set on the command line.
+    pub fn is_overridden(&self, key: &str) -> bool {
+        self.overridden.contains(key)
+    }
+
+    /// A [`ConfigError::Invalid`] for `key`.
+    pub fn invalid(&self, key: &str, message: impl Into<String>) -> ConfigError {
+        ConfigError::Invalid { location: self.locate(key), message: message.into() }
+    }
+
+    /// Turns a serde message from deserialising the table at `prefix` (e.g. `geometry`, or `""` for
+    /// the whole document) into an error located at the offending key.
+    pub fn serde_error(&self, prefix: &str, message: &str) -> ConfigError {
+        let key = offending_key(prefix, message);
+        let text = message.split("\nin `").next().unwrap_or(message).trim();
+        self.invalid(&key, text.to_owned())
+    }
+}
+
+/// A loaded, validated config and where it came from.
+#[derive(Clone, Debug)]
+pub struct LoadedConfig {
+    pub config: ExperimentConfig,
+    pub source: ConfigSource,
+}
+
+/// Reads `path`, applies `overrides` (`key.path=value`, the value in TOML syntax or else a bare
+/// string) and validates the result.
+pub fn load(path: &Path, overrides: &[String]) -> Result<LoadedConfig, ConfigError> {
+    if path.is_dir() {
+        return Err(ConfigError::Io {
+            path: path.to_owned(),
+            source: std::io::Error::other("is a directory, not a config file"),
+        });
+    }
+    let text =
+        std::fs::read_to_string(path).map_err(|source| ConfigError::Io { path: path.to_owned(), source })?;
+    let mut source = ConfigSource { path: path.to_owned(), text, overridden: BTreeSet::new() };
+    let mut tree: toml::Table = toml::from_str(&source.text).map_err(|e| ConfigError::Syntax {
+        path: path.to_owned(),
+        message: e.to_string().trim().to_owned(),
+    })?;
+    let cwd = std::env::current_dir().unwrap_or_default();
+    for arg in overrides {
+        let key = apply_override(&mut tree, arg, &cwd)?;
+        source.overridden.insert(key);
+    }
+    let config = ExperimentConfig::deserialize(toml::Value::Table(tree))
+        .map_err(|e| source.serde_error("", &e.to_string()))?;
+    config.validate(&source)?;
+    Ok(LoadedConfig { config, source })
+}
+
+/// Parses a config from a string (no overrides).
+pub fn from_str(name: &str, text: &str) -> Result<LoadedConfig, ConfigError> {
+    let source = ConfigSource::in_memory(name, text);
+    let tree: toml::Table = toml::from_str(text).map_err(|e| ConfigError::Syntax {
+        path: PathBuf::from(name),
+        message: e.to_string().trim().to_owned(),
+    })?;
+    let config = ExperimentConfig::deserialize(toml::Value::Table(tree))
+        .map_err(|e| source.serde_error("", &e.to_string()))?;
+    config.validate(&source)?;
+    Ok(LoadedConfig { config, source })
+}
+
+/// Applies one `key.path=value` override; returns the dotted key. Paths set this way that name
+/// input files (`geometry.path`) are made absolute against `cwd`, since the user typed them relative
+/// to where they stand.
+fn apply_override(tree: &mut toml::Table, arg: &str, cwd: &Path) -> Result<String, ConfigError> {
+    let err = |m: &str| ConfigError::Override { arg: arg.to_owned(), message: m.to_owned() };
+    let (key, raw) = arg.split_once('=').ok_or_else(|| err("expected KEY=VALUE, e.g. training.steps=200"))?;
+    let key = key.trim();
+    let parts: Vec<&str> = key.split('.').collect();
+    if parts.iter().any(|p| p.is_empty()) {
+        return Err(err("the key has an empty segment"));
+    }
+    let mut value = parse_override_value(raw.trim());
+    if key == "geometry.path"
+        && let toml::Value::String(p) = &value
+        && Path::new(p).is_relative()
+    {
+        value = toml::Value::String(cwd.join(p).to_string_lossy().into_owned());
+    }
+    let (last, parents) = parts.split_last().expect("split yields at least one part");
+    let mut table = tree;
+    for (depth, p) in parents.iter().enumerate() {
+        let entry = table.entry(p.to_string()).or_insert_with(|| toml::Value::Table(toml::Table::new()));
+        table = entry
+            .as_table_mut()
+            .ok_or_else(|| err(&format!("`{}` is not a table", parts[..=depth].join("."))))?;
+    }
+    table.insert(last.to_string(), value);
+    Ok(key.to_owned())
+}
+
+/// A TOML value if `raw` is one (`200`, `1e-3`, `true`, `"x"`, `[1, 2]`), else the bare string.
+fn parse_override_value(raw: &str) -> toml::Value {
+    toml::from_str::<toml::Table>(&format!("v = {raw}"))
+        .ok()
+        .and_then(|mut t| t.remove("v"))
+        .unwrap_or_else(|| toml::Value::String(raw.to_owned()))
+}
+
+/// The dotted key a serde message is about: `in \`a.b\`` gives the path; an unknown field adds its
+/// name. `prefix` is the path of the table that was deserialised.
+fn offending_key(prefix: &str, message: &str) -> String {
+    let path = message.rsplit_once("\nin `").map(|(_, p)| p.trim_end_matches('`').trim_end_matches("`\n"));
+    let unknown = message.strip_prefix("unknown field `").and_then(|r| r.split('`').next());
+    let mut parts: Vec<&str> = Vec::new();
+    if !prefix.is_empty() {
+        parts.push(prefix);
+    }
+    if let Some(p) = path {
+        parts.push(p.trim_end_matches('`'));
+    }
+    if let Some(u) = unknown {
+        parts.push(u);
+    }
+    parts.join(".")
+}
+
+/// 1-based line of the dotted `key` in `text`, if it is written there.
+fn key_line(text: &str, key: &str) -> Option<usize> {
+    let doc = toml_edit::Document::parse(text).ok()?;
+    let mut item = doc.as_item();
+    let mut span = None;
+    for part in key.split('.') {
+        let (k, v) = match item {
+            toml_edit::Item::Table(t) => t.get_key_value(part)?,
+            toml_edit::Item::Value(toml_edit::Value::InlineTable(t)) => t.get_key_value(part)?,
+            _ => return None,
+        };
+        span = k.span().or(span);
+        item = v;
+    }
+    span.map(|s| text[..s.start].matches('\n').count() + 1)
+}
+
+impl ModelConfig {
+    /// Depth, width and encoding degree of the chart network.
+    pub fn chart_shape(&self) -> (usize, usize, usize) {
+        self.resolve(&self.chart, 1)
+    }
+
+    /// Depth, width and encoding degree of the texture networks.
+    pub fn texture_shape(&self) -> (usize, usize, usize) {
+        self.resolve(&self.texture, 4)
+    }
+
+    /// Depth, width and encoding degree of the surface networks.
+    pub fn surface_shape(&self) -> (usize, usize, usize) {
+        self.resolve(&self.surface, 4)
+    }
+
+    fn resolve(&self, o: &NetworkOverrides, posenc: usize) -> (usize, usize, usize) {
+        (o.depth.unwrap_or(self.depth), o.width.unwrap_or(self.width), o.posenc.unwrap_or(posenc))
+    }
+
+    /// Texels per side of each normal grid.
+    pub fn grid_resolution(&self) -> usize {
+        self.grid_resolution
+            .unwrap_or_else(|| (256.0 * (2.0 / self.charts.max(1) as f64).sqrt()).round() as usize)
+    }
+}
+
+impl ExperimentConfig {
+    /// Range checks that serde's types cannot express.
+    pub fn validate(&self, src: &ConfigSource) -> Result<(), ConfigError> {
+        let m = &self.model;
+        let t = &self.training;
+        let o = &self.optimizer;
+        let positive =
+            |key: &str, v: usize| if v == 0 { Err(src.invalid(key, "must be at least 1")) } else { Ok(()) };
+        positive("model.charts", m.charts)?;
+        if m.charts > 256 {
+            return Err(
+                src.invalid("model.charts", format!("{} charts is more than the supported 256", m.charts))
+            );
+        }
+        positive("model.depth", m.depth)?;
+        positive("model.width", m.width)?;
+        for (name, ov) in [("chart", &m.chart), ("texture", &m.texture), ("surface", &m.surface)] {
+            positive(&format!("model.{name}.depth"), ov.depth.unwrap_or(1))?;
+            positive(&format!("model.{name}.width"), ov.width.unwrap_or(1))?;
+            if ov.posenc.is_some_and(|p| p > 16) {
+                return Err(
+                    src.invalid(&format!("model.{name}.posenc"), "degrees above 16 overflow f32 frequencies")
+                );
+            }
+        }
+        if m.grid_resolution.is_some_and(|r| !(2..=4096).contains(&r)) {
+            return Err(src.invalid("model.grid_resolution", "must be between 2 and 4096"));
+        }
+        finite("model.sigma_init", m.sigma_init, src)?;
+        positive("training.batch_3d", t.batch_3d)?;
+        positive("training.batch_uv", t.batch_uv)?;
+        if t.steps == 0 {
+            return Err(src.invalid("training.steps", "must be at least 1"));
+        }
+        if !(t.epsilon.is_finite() && t.epsilon > 0.0) {
+            return Err(src.invalid("training.epsilon", "must be a positive number"));
+        }
+        if t.time_budget_minutes.is_some_and(|b| !(b.is_finite() && b > 0.0)) {
+            return Err(src.invalid("training.time_budget_minutes", "must be a positive number of minutes"));
+        }
+        if t.checkpoint_every == 0 {
+            return Err(src.invalid("training.checkpoint_every", "must be at least 1"));
+        }
+        for (key, v) in [
+            ("optimizer.lr_mlp", o.lr_mlp),
+            ("optimizer.lr_sigma", o.lr_sigma),
+            ("optimizer.lr_grid", o.lr_grid),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(src.invalid(key, "must be a non-negative number"));
+            }
+        }
+        for (key, v) in [("optimizer.beta1", o.beta1), ("optimizer.beta2", o.beta2)] {
+            if !(0.0..1.0).contains(&v) {
+                return Err(src.invalid(key, "must be in [0, 1)"));
+            }
+        }
+        if !(o.eps.is_finite() && o.eps > 0.0) {
+            return Err(src.invalid("optimizer.eps", "must be a positive number"));
+        }
+        if !(0.0..=1.0).contains(&o.final_lr_factor) {
+            return Err(src.invalid("optimizer.final_lr_factor", "must be in [0, 1]"));
+        }
+        for (name, l) in self.losses.iter().flatten() {
+            if let Some(w) = l.weight
+                && !(w.is_finite() && w >= 0.0)
+            {
+                return Err(src.invalid(&format!("losses.{name}.weight"), "must be a non-negative number"));
+            }
+        }
+        Ok(())
+    }
+}
+
+fn finite(key: &str, v: f32, src: &ConfigSource) -> Result<(), ConfigError> {
+    if v.is_finite() { Ok(()) } else { Err(src.invalid(key, "must be a finite number")) }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MINIMAL: &str = "[geometry]\nsource = \"mesh\"\npath = \"bunny.obj\"\n";
+
+    #[test]
+    fn minimal_config_gets_paper_defaults() {
+        let c = from_str("c.toml", MINIMAL).unwrap().config;
+        assert_eq!(c.model.charts, 1);
+        assert_eq!((c.model.depth, c.model.width), (8, 256));
+        assert_eq!(c.model.texture_shape(), (8, 256, 4));
+        assert_eq!(c.model.chart_shape(), (8, 256, 1));
+        assert_eq!(c.optimizer.lr_sigma, 0.1);
+        assert_eq!(c.geometry.options["path"].as_str(), Some("bunny.obj"));
+        assert!(c.losses.is_none());
+    }
+
+    #[test]
+    fn grid_resolution_follows_the_texture_budget() {
+        let mut m = ModelConfig { charts: 1, ..ModelConfig::default() };
+        assert_eq!(m.grid_resolution(), 362);
+        m.charts = 8;
+        assert_eq!(m.grid_resolution(), 128);
+    }
+
+    #[test]
+    fn typo_names_key_line_and_valid_keys() {
+        let text = format!("{MINIMAL}\n[model]\ncharts = 2\ndepht = 3\n");
+        let e = from_str("c.toml", &text).unwrap_err().to_string();
+        assert!(e.contains("line 7"), "{e}");
+        assert!(e.contains("model.depht"), "{e}");
+        assert!(e.contains("`depth`") && e.contains("`width`"), "{e}");
+    }
+
+    #[test]
+    fn wrong_type_and_negative_size_name_the_key() {
+        let e =
+            from_str("c.toml", &format!("{MINIMAL}[training]\nsteps = \"many\"\n")).unwrap_err().to_string();
+        assert!(e.contains("training.steps") && e.contains("line 5"), "{e}");
+        let e = from_str("c.toml", &format!("{MINIMAL}[training]\nbatch_3d = -5\n")).unwrap_err().to_string();
+        assert!(e.contains("training.batch_3d"), "{e}");
+        let e = from_str("c.toml", &format!("{MINIMAL}[training]\nbatch_3d = 0\n")).unwrap_err().to_string();
+        assert!(e.contains("training.batch_3d") && e.contains("at least 1"), "{e}");
+    }
+
+    #[test]
+    fn syntax_errors_point_at_the_line() {
+        let e = from_str("c.toml", "[geometry\nsource = 1").unwrap_err().to_string();
+        assert!(e.contains("line 1") && e.contains("not valid TOML"), "{e}");
+    }
+
+    #[test]
+    fn overrides_set_values_and_are_reported_as_such() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("c.toml");
+        std::fs::write(&p, MINIMAL).unwrap();
+        let sets = [
+            "training.steps=200".to_owned(),
+            "model.texture.depth=3".to_owned(),
+            "output.dir=runs/x".to_owned(),
+        ];
+        let c = load(&p, &sets).unwrap();
+        assert_eq!(c.config.training.steps, 200);
+        assert_eq!(c.config.model.texture_shape().0, 3);
+        assert_eq!(c.config.output.dir, PathBuf::from("runs/x"));
+        let e = load(&p, &["training.steps=-1".to_owned()]).unwrap_err().to_string();
+        assert!(e.contains("set with --set"), "{e}");
+        let e = load(&p, &["training.stesp=5".to_owned()]).unwrap_err().to_string();
+        assert!(e.contains("stesp") && e.contains("`steps`"), "{e}");
+        let e = load(&p, &["noequals".to_owned()]).unwrap_err().to_string();
+        assert!(e.contains("KEY=VALUE"), "{e}");
+    }
+
+    #[test]
+    fn override_paths_resolve_against_the_working_directory() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("c.toml");
+        std::fs::write(&p, MINIMAL).unwrap();
+        let c = load(&p, &["geometry.path=other.obj".to_owned()]).unwrap();
+        let got = PathBuf::from(c.config.geometry.options["path"].as_str().unwrap());
+        assert_eq!(got, std::env::current_dir().unwrap().join("other.obj"));
+    }
+
+    #[test]
+    fn missing_file_and_directory_are_clear_errors() {
+        let e = load(Path::new("/nonexistent/c.toml"), &[]).unwrap_err().to_string();
+        assert!(e.contains("/nonexistent/c.toml"), "{e}");
+        let dir = tempfile::tempdir().unwrap();
+        let e = load(dir.path(), &[]).unwrap_err().to_string();
+        assert!(e.contains("directory"), "{e}");
+    }
+
+    #[test]
+    fn resolved_config_round_trips_through_toml() {
+        let c =
+            from_str("c.toml", &format!("{MINIMAL}[losses.stretch]\nweight = 0.2\narea = \"jacobian\"\n"))
+                .unwrap()
+                .config;
+        let text = toml::to_string(&c).unwrap();
+        let back = from_str("r.toml", &text).unwrap().config;
+        assert_eq!(c, back);
+    }
+}

@@ -1,0 +1,366 @@
+//! The trainer: one optimisation step at a time, deterministic for a config and seed.
+//!
+//! A step draws its batch from `(seed, step)`, records every enabled loss on the tape through one
+//! shared [`StepContext`], sums the weighted terms, runs backward once and takes an Adam step. A term
+//! or gradient that is NaN or infinite skips the step (parameters untouched) and the outcome names the
+//! term responsible; the run loop ([`crate::run`]) rolls back after too many skipped steps.
+
+use std::collections::BTreeMap;
+
+use nuvo_autodiff::optim::{Adam, AdamConfig, CosineSchedule};
+use nuvo_autodiff::{ParamStore, Shape, Tape, Var};
+use nuvo_geometry::{BuildContext, GeometryError, GeometrySource, SourceRegistry};
+use nuvo_losses::{Loss, LossError, LossRegistry, Networks, StepContext};
+
+use crate::batch::{ShortBatch, StepBatch};
+use crate::checkpoint::{Checkpoint, CheckpointError};
+use crate::config::{ConfigError, ExperimentConfig, LoadedConfig};
+use crate::model::{MODEL_FRAME_SCALE, NuvoModel, groups};
+use crate::seeds::{Stream, derive};
+
+/// Anything that stops training.
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    #[error(transparent)]
+    Geometry(#[from] GeometryError),
+    #[error(transparent)]
+    Loss(#[from] LossError),
+    #[error(transparent)]
+    Checkpoint(#[from] CheckpointError),
+    #[error(transparent)]
+    Batch(#[from] ShortBatch),
+    #[error("cannot write {path}: {source}")]
+    Io {
+        path: std::path::PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{0}")]
+    Resume(String),
+    #[error("training diverged: {0}")]
+    Diverged(String),
+}
+
+/// One weighted term of the objective.
+pub struct Term {
+    /// The `[losses.NAME]` key.
+    pub name: String,
+    /// Its weight (> 0; zero-weight terms are not built).
+    pub weight: f32,
+    loss: Box<dyn Loss>,
+}
+
+/// What one step did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StepOutcome {
+    /// The step's index (0-based).
+    pub step: u64,
+    /// The weighted sum of the terms.
+    pub total: f32,
+    /// Each term's unweighted value, in config order.
+    pub terms: Vec<(String, f32)>,
+    /// The schedule's learning-rate factor used (including any rollback scale).
+    pub lr_factor: f32,
+    /// `σ` after the step.
+    pub sigma: f32,
+    /// Why the step was skipped, if it was.
+    pub skipped: Option<String>,
+}
+
+/// The model, its parameters and optimiser, the scene, and the losses.
+pub struct Trainer {
+    config: ExperimentConfig,
+    source: Box<dyn GeometrySource>,
+    model: NuvoModel,
+    tape: Tape,
+    adam: Adam,
+    schedule: CosineSchedule,
+    terms: Vec<Term>,
+    step: u64,
+    lr_scale: f32,
+    batch: StepBatch,
+}
+
+impl Trainer {
+    /// Builds everything a config describes: the geometry source and losses come from the
+    /// registries, so applications can register their own before calling this.
+    pub fn new(
+        loaded: &LoadedConfig,
+        sources: &SourceRegistry,
+        losses: &LossRegistry,
+    ) -> Result<Self, TrainError> {
+        let config = loaded.config.clone();
+        let src = &loaded.source;
+        let ctx = BuildContext { base_dir: src.base_dir() };
+        let source =
+            sources.build(&config.geometry.source, &config.geometry.options, &ctx).map_err(|e| match e {
+                GeometryError::Options { message, .. } => {
+                    TrainError::Config(src.serde_error("geometry", &message))
+                }
+                GeometryError::UnknownSource { .. } => {
+                    TrainError::Config(src.invalid("geometry.source", e.to_string()))
+                }
+                other => TrainError::Geometry(other),
+            })?;
+        let terms = build_terms(&config, loaded, losses)?;
+        let mut params = ParamStore::new();
+        let model = NuvoModel::new(&config.model, &mut params, derive(config.seed, 0, Stream::Init));
+        let o = &config.optimizer;
+        let lrs = BTreeMap::from([
+            (groups::MLP.to_owned(), o.lr_mlp),
+            (groups::SIGMA.to_owned(), o.lr_sigma),
+            (groups::GRID.to_owned(), o.lr_grid),
+        ]);
+        let adam = Adam::new(&params, AdamConfig { beta1: o.beta1, beta2: o.beta2, eps: o.eps }, &lrs)
+            .expect("the model only uses the three configured groups");
+        let schedule = CosineSchedule {
+            total_steps: config.training.steps,
+            warmup_steps: o.warmup_steps,
+            final_factor: o.final_lr_factor,
+        };
+        Ok(Trainer {
+            config,
+            source,
+            model,
+            tape: Tape::new(params),
+            adam,
+            schedule,
+            terms,
+            step: 0,
+            lr_scale: 1.0,
+            batch: StepBatch::default(),
+        })
+    }
+
+    /// The config being trained.
+    pub fn config(&self) -> &ExperimentConfig {
+        &self.config
+    }
+
+    /// The scene.
+    pub fn source(&self) -> &dyn GeometrySource {
+        &*self.source
+    }
+
+    /// The networks' handles.
+    pub fn model(&self) -> &NuvoModel {
+        &self.model
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &ParamStore {
+        self.tape.params()
+    }
+
+    /// The enabled terms.
+    pub fn terms(&self) -> &[Term] {
+        &self.terms
+    }
+
+    /// Steps completed so far.
+    pub fn step_index(&self) -> u64 {
+        self.step
+    }
+
+    /// Steps the schedule spans.
+    pub fn total_steps(&self) -> u64 {
+        self.config.training.steps
+    }
+
+    /// The learning-rate multiplier left by NaN rollbacks (1 normally).
+    pub fn lr_scale(&self) -> f32 {
+        self.lr_scale
+    }
+
+    /// Halves every learning rate from now on (after a rollback).
+    pub fn halve_learning_rates(&mut self) {
+        self.lr_scale *= 0.5;
+    }
+
+    /// Runs one optimisation step.
+    pub fn step(&mut self) -> Result<StepOutcome, TrainError> {
+        let t = &self.config.training;
+        self.batch = StepBatch::draw(&*self.source, t.batch_3d, t.batch_uv, self.config.seed, self.step)?;
+        let lr_factor = self.schedule.factor(self.step) * self.lr_scale;
+        let mut outcome = StepOutcome {
+            step: self.step,
+            total: f32::NAN,
+            terms: Vec::with_capacity(self.terms.len()),
+            lr_factor,
+            sigma: f32::NAN,
+            skipped: None,
+        };
+        let total = self.record(None, &mut outcome.terms)?;
+        outcome.total = self.tape.scalar(total);
+        if let Some((name, v)) = outcome.terms.iter().find(|(_, v)| !v.is_finite()) {
+            outcome.skipped = Some(format!("loss `{name}` is {v}"));
+        } else {
+            self.tape.backward(total);
+            if grads_finite(self.tape.params()) {
+                self.adam.step(self.tape.params_mut(), lr_factor);
+            } else {
+                outcome.skipped =
+                    Some(format!("the gradient of {} is not finite", self.diagnose_gradient()?));
+            }
+        }
+        outcome.sigma = self.tape.params().value(self.model.sigma_param()).data()[0];
+        self.step += 1;
+        Ok(outcome)
+    }
+
+    /// Records the weighted sum of the terms (or of term `only`) on a fresh tape; pushes each
+    /// term's unweighted value into `values`.
+    fn record(&mut self, only: Option<usize>, values: &mut Vec<(String, f32)>) -> Result<Var, TrainError> {
+        self.tape.reset();
+        self.tape.params_mut().zero_grads();
+        let mut ctx =
+            StepContext::new(&mut self.tape, &self.model, self.batch.data(self.config.training.epsilon));
+        let mut total: Option<Var> = None;
+        for (k, term) in self.terms.iter().enumerate() {
+            if only.is_some_and(|o| o != k) {
+                continue;
+            }
+            let v = term.loss.evaluate(&mut ctx)?;
+            values.push((term.name.clone(), ctx.tape.scalar(v)));
+            let w = ctx.tape.scale(v, term.weight);
+            total = Some(match total {
+                None => w,
+                Some(t) => ctx.tape.add(t, w),
+            });
+        }
+        Ok(total.unwrap_or_else(|| ctx.tape.constant(Shape::SCALAR, 0.0)))
+    }
+
+    /// Which term's gradient is not finite: re-records the step one term at a time. Only runs after a
+    /// failure, so its cost does not matter.
+    fn diagnose_gradient(&mut self) -> Result<String, TrainError> {
+        let mut culprit = "the total loss".to_owned();
+        for k in 0..self.terms.len() {
+            let mut ignored = Vec::new();
+            let v = self.record(Some(k), &mut ignored)?;
+            self.tape.backward(v);
+            if !grads_finite(self.tape.params()) {
+                culprit = format!("loss `{}`", self.terms[k].name);
+                break;
+            }
+        }
+        self.tape.params_mut().zero_grads();
+        Ok(culprit)
+    }
+
+    /// Chart probabilities (`V×n`) and every chart's texture coordinates (`V×n×2`) at points given
+    /// in the canonical frame, evaluated in chunks so memory stays bounded on huge meshes.
+    pub fn evaluate_atlas(&mut self, canonical: &[[f32; 3]]) -> (Vec<f32>, Vec<f32>) {
+        const CHUNK: usize = 16384;
+        let n = self.model.charts();
+        let mut probs = Vec::with_capacity(canonical.len() * n);
+        let mut uvs = vec![0.0f32; canonical.len() * n * 2];
+        for (c, chunk) in canonical.chunks(CHUNK).enumerate() {
+            self.tape.reset();
+            let x = self.tape.input_with(Shape::new(chunk.len(), 3), |d| {
+                for (row, p) in d.chunks_exact_mut(3).zip(chunk) {
+                    row.iter_mut().zip(p).for_each(|(r, &v)| *r = v * MODEL_FRAME_SCALE);
+                }
+            });
+            let logits = self.model.chart_logits(&mut self.tape, x);
+            let p = self.tape.softmax(logits);
+            probs.extend_from_slice(self.tape.value(p));
+            for i in 0..n {
+                let t = self.model.texture(&mut self.tape, i, x);
+                for (k, uv) in self.tape.value(t).chunks_exact(2).enumerate() {
+                    let at = ((c * CHUNK + k) * n + i) * 2;
+                    uvs[at..at + 2].copy_from_slice(uv);
+                }
+            }
+        }
+        self.tape.reset();
+        (probs, uvs)
+    }
+
+    /// A checkpoint of the current state.
+    pub fn checkpoint(&self) -> Checkpoint {
+        let p = self.tape.params();
+        let (m, v) = self.adam.moments();
+        Checkpoint {
+            step: self.step,
+            lr_scale: self.lr_scale,
+            config_toml: toml::to_string(&self.config).unwrap_or_default(),
+            to_canonical: self.source.to_canonical(),
+            params: p.ids().map(|id| (p.info(id).name.clone(), p.value(id).clone())).collect(),
+            adam: (self.adam.steps(), m.to_vec(), v.to_vec()),
+        }
+    }
+
+    /// Continues from a checkpoint of this same experiment. Fails, changing nothing, if the
+    /// checkpoint's parameters do not match this model's names and shapes.
+    pub fn restore(&mut self, ckpt: &Checkpoint) -> Result<(), TrainError> {
+        let params = self.tape.params();
+        let mismatch = |m: String| TrainError::Resume(format!("the checkpoint does not fit this model: {m}"));
+        if ckpt.params.len() != params.len() {
+            return Err(mismatch(format!(
+                "{} parameters saved, {} in the model",
+                ckpt.params.len(),
+                params.len()
+            )));
+        }
+        let mut values = Vec::with_capacity(params.len());
+        let (mut m, mut v) = (vec![Vec::new(); params.len()], vec![Vec::new(); params.len()]);
+        for (k, (name, t)) in ckpt.params.iter().enumerate() {
+            let id = params.find(name).ok_or_else(|| mismatch(format!("unknown parameter `{name}`")))?;
+            if params.value(id).shape() != t.shape() {
+                return Err(mismatch(format!(
+                    "`{name}` is {} in the checkpoint, {} in the model",
+                    t.shape(),
+                    params.value(id).shape()
+                )));
+            }
+            values.push((id, t.clone()));
+            m[id.index()] = ckpt.adam.1[k].clone();
+            v[id.index()] = ckpt.adam.2[k].clone();
+        }
+        self.adam.restore(ckpt.adam.0, m, v).map_err(mismatch)?;
+        for (id, t) in values {
+            *self.tape.params_mut().value_mut(id) = t;
+        }
+        self.step = ckpt.step;
+        self.lr_scale = ckpt.lr_scale;
+        Ok(())
+    }
+}
+
+fn grads_finite(p: &ParamStore) -> bool {
+    p.ids().all(|id| p.grad(id).data().iter().all(|g| g.is_finite()))
+}
+
+/// The enabled terms, in config order (all built-ins at paper weights when `[losses]` is absent).
+fn build_terms(
+    config: &ExperimentConfig,
+    loaded: &LoadedConfig,
+    registry: &LossRegistry,
+) -> Result<Vec<Term>, TrainError> {
+    let src = &loaded.source;
+    let listed: Vec<(String, Option<f32>, toml::Table)> = match &config.losses {
+        None => registry.list().map(|i| (i.name.to_owned(), None, toml::Table::new())).collect(),
+        Some(map) => map.iter().map(|(k, l)| (k.clone(), l.weight, l.options.clone())).collect(),
+    };
+    let mut terms = Vec::new();
+    for (name, weight, options) in listed {
+        let info = registry.info(&name).ok_or_else(|| {
+            src.invalid(
+                &format!("losses.{name}"),
+                format!("unknown loss `{name}`; known losses: {}", registry.names()),
+            )
+        })?;
+        let weight = weight.unwrap_or(info.default_weight);
+        let loss = registry.build(&name, &options).map_err(|e| match e {
+            LossError::Options { message, .. } => src.serde_error(&format!("losses.{name}"), &message),
+            other => src.invalid(&format!("losses.{name}"), other.to_string()),
+        })?;
+        if weight > 0.0 {
+            terms.push(Term { name, weight, loss });
+        }
+    }
+    Ok(terms)
+}

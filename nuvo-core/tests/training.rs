@@ -1,0 +1,338 @@
+//! End-to-end behaviour of the trainer and training runs on an analytic scene (a unit sphere).
+
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use nuvo_autodiff::{Shape, Var};
+use nuvo_core::config::{self, LoadedConfig};
+use nuvo_core::run::{RunOptions, Silent, files, run};
+use nuvo_core::{Checkpoint, TrainError, Trainer};
+use nuvo_geometry::{
+    Aabb, BuildContext, GeometryError, GeometrySource, Similarity, SourceRegistry, SurfaceSamples,
+};
+use nuvo_losses::{Loss, LossError, LossInfo, LossRegistry, StepContext};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// Uniform samples on the unit sphere (canonical frame), normals pointing out.
+struct Sphere;
+
+impl GeometrySource for Sphere {
+    fn kind(&self) -> &str {
+        "sphere"
+    }
+    fn sample(&self, n: usize, seed: u64) -> SurfaceSamples {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let positions: Vec<[f32; 3]> = (0..n)
+            .map(|_| {
+                let z: f32 = rng.random_range(-1.0..1.0);
+                let a: f32 = rng.random_range(0.0..std::f32::consts::TAU);
+                let r = (1.0 - z * z).sqrt();
+                [r * a.cos(), r * a.sin(), z]
+            })
+            .collect();
+        SurfaceSamples { normals: positions.clone(), positions }
+    }
+    fn bounds(&self) -> Aabb {
+        Aabb { min: [-1.0; 3], max: [1.0; 3] }
+    }
+    fn to_canonical(&self) -> Similarity {
+        Similarity::IDENTITY
+    }
+    fn describe(&self) -> String {
+        "unit sphere".into()
+    }
+}
+
+fn sphere(options: &toml::Table, _: &BuildContext) -> Result<Box<dyn GeometrySource>, GeometryError> {
+    match options.keys().next() {
+        None => Ok(Box::new(Sphere)),
+        Some(k) => Err(GeometryError::Options {
+            source_name: "sphere".into(),
+            message: format!("unknown field `{k}`, expected nothing"),
+        }),
+    }
+}
+
+fn sources() -> SourceRegistry {
+    let mut r = SourceRegistry::new();
+    r.register("sphere", "unit sphere (tests)", sphere);
+    r
+}
+
+const SMALL: &str = r#"
+seed = 7
+[geometry]
+source = "sphere"
+[model]
+charts = 2
+depth = 3
+width = 32
+grid_resolution = 16
+[training]
+steps = 60
+batch_3d = 256
+batch_uv = 256
+checkpoint_every = 20
+[optimizer]
+lr_mlp = 1e-3
+"#;
+
+fn small(extra: &str) -> LoadedConfig {
+    config::from_str("small.toml", &format!("{SMALL}{extra}")).unwrap()
+}
+
+fn trainer(cfg: &LoadedConfig) -> Trainer {
+    Trainer::new(cfg, &sources(), &LossRegistry::with_builtins()).unwrap()
+}
+
+fn param_values(t: &Trainer) -> Vec<f32> {
+    let p = t.params();
+    p.ids().flat_map(|id| p.value(id).data().to_vec()).collect()
+}
+
+#[test]
+fn training_lowers_the_loss_and_writes_the_run_folder() {
+    let cfg = small("");
+    let mut t = trainer(&cfg);
+    assert_eq!(t.terms().len(), 8, "all built-in losses by default");
+    let first = t.step().unwrap();
+    assert!(first.skipped.is_none() && first.total.is_finite());
+    let dir = tempfile::tempdir().unwrap();
+    let opts = RunOptions { out_dir: dir.path().join("run"), resume: false };
+    let summary = run(&mut t, &opts, &mut Silent).unwrap();
+    assert_eq!(summary.steps, 60);
+    assert_eq!(summary.skipped, 0);
+    let last = summary.last.unwrap();
+    assert!(last.total < first.total, "loss went from {} to {}", first.total, last.total);
+    for f in [files::CONFIG, files::LOG, files::CHECKPOINT] {
+        assert!(opts.out_dir.join(f).is_file(), "{f} missing");
+    }
+    let log = std::fs::read_to_string(opts.out_dir.join(files::LOG)).unwrap();
+    // The first step ran before `run`, so the log covers steps 1..60.
+    assert_eq!(log.lines().count(), 59);
+    let line: serde_json::Value = serde_json::from_str(log.lines().last().unwrap()).unwrap();
+    assert_eq!(line["step"], 59);
+    assert!(line["terms"]["cycle_3d"].is_number() && line["terms"]["texture"].is_number());
+    // The resolved config reads back as the same experiment.
+    let saved = std::fs::read_to_string(opts.out_dir.join(files::CONFIG)).unwrap();
+    assert_eq!(config::from_str("saved.toml", &saved).unwrap().config, cfg.config);
+}
+
+#[test]
+fn same_seed_same_parameters_different_seed_different() {
+    let run_steps = |extra: &str| {
+        let mut t = trainer(&small(extra));
+        for _ in 0..15 {
+            t.step().unwrap();
+        }
+        param_values(&t)
+    };
+    let a = run_steps("");
+    assert_eq!(a, run_steps(""));
+    assert_eq!(
+        a,
+        run_steps("[output]\ndir = \"elsewhere\"\n"),
+        "the output folder must not change the result"
+    );
+    let mut other = small("");
+    other.config.seed = 8;
+    let mut t = Trainer::new(&other, &sources(), &LossRegistry::with_builtins()).unwrap();
+    for _ in 0..15 {
+        t.step().unwrap();
+    }
+    assert_ne!(a, param_values(&t));
+}
+
+#[test]
+fn a_resumed_run_matches_an_uninterrupted_one() {
+    let cfg = small("");
+    let dir = tempfile::tempdir().unwrap();
+    // Uninterrupted.
+    let mut full = trainer(&cfg);
+    run(&mut full, &RunOptions { out_dir: dir.path().join("full"), resume: false }, &mut Silent).unwrap();
+    // "Killed" after 33 steps: the last checkpoint on disk is from step 20, and the log runs on.
+    let out = dir.path().join("killed");
+    let mut partial = trainer(&cfg);
+    std::fs::create_dir_all(&out).unwrap();
+    for s in 0..33 {
+        partial.step().unwrap();
+        if s + 1 == 20 {
+            partial.checkpoint().save(&out.join(files::CHECKPOINT)).unwrap();
+        }
+    }
+    std::fs::write(out.join(files::LOG), (0..33).map(|s| format!("{{\"step\":{s}}}\n")).collect::<String>())
+        .unwrap();
+    drop(partial);
+    let mut resumed = trainer(&cfg);
+    let summary = run(&mut resumed, &RunOptions { out_dir: out.clone(), resume: true }, &mut Silent).unwrap();
+    assert_eq!(summary.steps, 60);
+    assert_eq!(param_values(&resumed), param_values(&full), "resumed parameters differ");
+    let a = Checkpoint::load(&dir.path().join("full").join(files::CHECKPOINT)).unwrap();
+    let b = Checkpoint::load(&out.join(files::CHECKPOINT)).unwrap();
+    assert_eq!(a, b);
+    // The log has each step exactly once.
+    let steps: Vec<u64> = std::fs::read_to_string(out.join(files::LOG))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["step"].as_u64().unwrap())
+        .collect();
+    assert_eq!(steps, (0..60).collect::<Vec<_>>());
+}
+
+#[test]
+fn an_existing_run_is_not_overwritten_and_a_missing_one_cannot_resume() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("r");
+    let mut t = trainer(&small(""));
+    t.step().unwrap();
+    std::fs::create_dir_all(&out).unwrap();
+    t.checkpoint().save(&out.join(files::CHECKPOINT)).unwrap();
+    let e = run(&mut trainer(&small("")), &RunOptions { out_dir: out.clone(), resume: false }, &mut Silent)
+        .unwrap_err();
+    assert!(e.to_string().contains("--resume"), "{e}");
+    let e = run(
+        &mut trainer(&small("")),
+        &RunOptions { out_dir: dir.path().join("none"), resume: true },
+        &mut Silent,
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("nothing to resume"), "{e}");
+    // A checkpoint from another experiment is refused.
+    let mut other = small("");
+    other.config.model.width = 16;
+    let e = run(
+        &mut Trainer::new(&other, &sources(), &LossRegistry::with_builtins()).unwrap(),
+        &RunOptions { out_dir: out, resume: true },
+        &mut Silent,
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("different config"), "{e}");
+}
+
+/// A loss that is NaN on calls `from..to` (counted across steps) and 0 otherwise.
+struct NanOnCalls {
+    calls: AtomicU64,
+    from: u64,
+    to: u64,
+}
+
+impl Loss for NanOnCalls {
+    fn evaluate(&self, ctx: &mut StepContext<'_>) -> Result<Var, LossError> {
+        let k = self.calls.fetch_add(1, Ordering::SeqCst);
+        let x = ctx.x();
+        let t = &mut *ctx.tape;
+        let zero = t.scale(x, 0.0);
+        let s = t.sum_all(zero);
+        let v = if (self.from..self.to).contains(&k) { f32::NAN } else { 0.0 };
+        let c = t.constant(Shape::SCALAR, v);
+        Ok(t.add(s, c))
+    }
+}
+
+fn registry_with_nan(from: u64, to: u64) -> LossRegistry {
+    let mut r = LossRegistry::with_builtins();
+    static FROM: AtomicU64 = AtomicU64::new(0);
+    static TO: AtomicU64 = AtomicU64::new(0);
+    FROM.store(from, Ordering::SeqCst);
+    TO.store(to, Ordering::SeqCst);
+    fn build(_: &toml::Table) -> Result<Box<dyn Loss>, LossError> {
+        Ok(Box::new(NanOnCalls {
+            calls: AtomicU64::new(0),
+            from: FROM.load(Ordering::SeqCst),
+            to: TO.load(Ordering::SeqCst),
+        }))
+    }
+    r.register(LossInfo { name: "nan_probe", summary: "test", default_weight: 1.0, options: &[] }, build);
+    r
+}
+
+const WITH_PROBE: &str = "[losses.cycle_3d]\n[losses.surface]\n[losses.nan_probe]\n";
+
+#[test]
+fn a_nan_term_skips_the_step_names_the_term_and_leaves_parameters_untouched() {
+    let cfg = small(WITH_PROBE);
+    let mut t = Trainer::new(&cfg, &sources(), &registry_with_nan(3, 5)).unwrap();
+    for _ in 0..3 {
+        assert!(t.step().unwrap().skipped.is_none());
+    }
+    let before = param_values(&t);
+    let o = t.step().unwrap();
+    assert_eq!(o.skipped.as_deref(), Some("loss `nan_probe` is NaN"));
+    assert_eq!(param_values(&t), before, "a skipped step changed parameters");
+    assert!(t.step().unwrap().skipped.is_some());
+    assert!(t.step().unwrap().skipped.is_none(), "training resumes once the term is finite");
+    assert_ne!(param_values(&t), before);
+}
+
+#[test]
+fn persistent_nans_roll_back_then_give_up_with_a_clear_error() {
+    let mut cfg = small(WITH_PROBE);
+    cfg.config.training.max_bad_steps = 2;
+    cfg.config.training.checkpoint_every = 5;
+    let mut t = Trainer::new(&cfg, &sources(), &registry_with_nan(8, u64::MAX)).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let e =
+        run(&mut t, &RunOptions { out_dir: dir.path().to_owned(), resume: false }, &mut Silent).unwrap_err();
+    assert!(matches!(e, TrainError::Diverged(_)), "{e}");
+    let msg = e.to_string();
+    assert!(msg.contains("nan_probe") && msg.contains("rollbacks"), "{msg}");
+    // The checkpoint left behind is the last good state (step 5).
+    assert_eq!(Checkpoint::load(&dir.path().join(files::CHECKPOINT)).unwrap().step, 5);
+}
+
+#[test]
+fn a_transient_nan_burst_is_survived_by_rolling_back() {
+    let mut cfg = small(WITH_PROBE);
+    cfg.config.training.max_bad_steps = 2;
+    cfg.config.training.checkpoint_every = 5;
+    // Calls 12..15 are NaN: three bad steps in a row trigger one rollback to step 10, after which the
+    // replayed steps are finite again.
+    let mut t = Trainer::new(&cfg, &sources(), &registry_with_nan(12, 15)).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let s = run(&mut t, &RunOptions { out_dir: dir.path().to_owned(), resume: false }, &mut Silent).unwrap();
+    assert_eq!(s.rollbacks, 1);
+    assert_eq!(s.steps, 60);
+    assert!((t.lr_scale() - 0.5).abs() < 1e-7);
+}
+
+#[test]
+fn config_mistakes_in_plugin_tables_name_the_key_and_line() {
+    let bad_loss = small("[losses.cycle_3d]\n[losses.strech]\nweight = 0.1\n");
+    let e = Trainer::new(&bad_loss, &sources(), &LossRegistry::with_builtins()).err().unwrap().to_string();
+    assert!(e.contains("losses.strech") && e.contains("stretch") && e.contains("line"), "{e}");
+    let bad_option = small("[losses.stretch]\nweight = 0.1\naera = \"paper\"\n");
+    let e = Trainer::new(&bad_option, &sources(), &LossRegistry::with_builtins()).err().unwrap().to_string();
+    assert!(e.contains("losses.stretch.aera") && e.contains("line 19") && e.contains("`area`"), "{e}");
+    let bad_source = config::from_str("c.toml", &SMALL.replace("\"sphere\"", "\"sphear\"")).unwrap();
+    let e = Trainer::new(&bad_source, &sources(), &LossRegistry::with_builtins()).err().unwrap().to_string();
+    assert!(e.contains("geometry.source") && e.contains("sphere") && e.contains("line 4"), "{e}");
+    let bad_geometry_key =
+        config::from_str("c.toml", &SMALL.replace("source = \"sphere\"", "source = \"sphere\"\nradius = 2"))
+            .unwrap();
+    let e = Trainer::new(&bad_geometry_key, &sources(), &LossRegistry::with_builtins())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("geometry.radius") && e.contains("line 5"), "{e}");
+}
+
+#[test]
+fn zero_weight_and_removed_losses_are_ablations() {
+    let t =
+        trainer(&small("[losses.cycle_3d]\n[losses.cycle_2d]\nweight = 0\n[losses.surface]\nweight = 2.5\n"));
+    let names: Vec<(&str, f32)> = t.terms().iter().map(|t| (t.name.as_str(), t.weight)).collect();
+    assert_eq!(names, vec![("cycle_3d", 1.0), ("surface", 2.5)]);
+}
+
+#[test]
+fn atlas_evaluation_gives_probabilities_and_unit_square_uvs() {
+    let mut t = trainer(&small(""));
+    let pts = [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]];
+    let (p, uv) = t.evaluate_atlas(&pts);
+    assert_eq!(p.len(), 3 * 2);
+    assert_eq!(uv.len(), 3 * 2 * 2);
+    for row in p.chunks(2) {
+        assert!((row.iter().sum::<f32>() - 1.0).abs() < 1e-5);
+    }
+    assert!(uv.iter().all(|&u| (0.0..=1.0).contains(&u)));
+}
