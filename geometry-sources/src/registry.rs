@@ -46,8 +46,13 @@ impl SourceRegistry {
 
     /// A registry with every source this crate provides.
     pub fn with_builtins() -> Self {
-        // Built-in sources are registered here as they land.
-        Self::new()
+        let mut r = Self::new();
+        r.register(
+            "mesh",
+            "triangle mesh (.obj/.gltf/.glb), area-uniform or visible-surface sampling",
+            crate::mesh_source::MeshSource::build,
+        );
+        r
     }
 
     /// Registers (or replaces) the source `name`.
