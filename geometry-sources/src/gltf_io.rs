@@ -77,7 +77,9 @@ fn mesh_instances(doc: &gltf::Document) -> Result<Vec<(gltf::Mesh<'_>, Mat4)>, S
     let mut out = Vec::new();
     // Depth-first walk with an explicit stack; a node graph deeper than the node count has a cycle.
     let max_depth = doc.nodes().len();
-    let mut stack: Vec<(gltf::Node, Mat4, usize)> = roots.into_iter().map(|n| (n, IDENTITY, 0)).collect();
+    // Pushed in reverse so instances come out in document order.
+    let mut stack: Vec<(gltf::Node, Mat4, usize)> =
+        roots.into_iter().rev().map(|n| (n, IDENTITY, 0)).collect();
     while let Some((node, parent, depth)) = stack.pop() {
         if depth > max_depth {
             return Err("the node hierarchy contains a cycle".into());
@@ -86,7 +88,8 @@ fn mesh_instances(doc: &gltf::Document) -> Result<Vec<(gltf::Mesh<'_>, Mat4)>, S
         if let Some(mesh) = node.mesh() {
             out.push((mesh, world));
         }
-        stack.extend(node.children().map(|c| (c, world, depth + 1)));
+        let children: Vec<gltf::Node> = node.children().collect();
+        stack.extend(children.into_iter().rev().map(|c| (c, world, depth + 1)));
     }
     Ok(out)
 }
@@ -129,16 +132,29 @@ fn check_accessor(
     let Some(view) = acc.view() else {
         return Err(format!("{what} accessor {} has no buffer view", acc.index()));
     };
-    if let Some(stride) = view.stride()
-        && stride < acc.size()
-    {
+    let stride = view.stride().unwrap_or(acc.size());
+    if stride < acc.size() {
         return Err(format!(
             "{what} accessor {}: byte stride {stride} is smaller than its element size {}",
             acc.index(),
             acc.size()
         ));
     }
-    Ok(())
+    let needed = acc
+        .count()
+        .checked_sub(1)
+        .and_then(|c| c.checked_mul(stride))
+        .and_then(|b| b.checked_add(acc.offset() + acc.size()));
+    match needed {
+        Some(n) if n <= view.length() => Ok(()),
+        _ => Err(format!(
+            "{what} accessor {}: {} elements of {} bytes do not fit its {}-byte buffer view",
+            acc.index(),
+            acc.count(),
+            acc.size(),
+            view.length()
+        )),
+    }
 }
 
 /// Reads one primitive in world coordinates; `None` for non-triangle primitives.
