@@ -49,8 +49,8 @@ fn obj_bad_input_is_a_clear_error() {
         ("out_of_range.obj", format!("{TRI}f 1 2 9\n").into(), "OBJ"),
         ("neg_out_of_range.obj", format!("{TRI}f -1 -2 -9\n").into(), "OBJ"),
         ("vt_out_of_range.obj", format!("{TRI}vt 0 0\nf 1/1 2/5 3/1\n").into(), "OBJ"),
-        ("nan.obj", format!("v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").into(), "non-finite"),
-        ("inf.obj", format!("v 0 0 0\nv inf 0 0\nv 0 1 0\nf 1 2 3\n").into(), "non-finite"),
+        ("nan.obj", "v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n".into(), "non-finite"),
+        ("inf.obj", "v 0 0 0\nv inf 0 0\nv 0 1 0\nf 1 2 3\n".into(), "non-finite"),
         ("truncated.obj", "v 0 0 0\nv 1 0 0\nv 0 1".into(), "OBJ"),
         ("garbage.obj", (0..4000u32).map(|i| (i.wrapping_mul(2654435761) >> 13) as u8).collect(), ""),
         ("mixed_uv.obj", format!("{TRI}v 1 1 0\nvt 0 0\nf 1/1 2/1 3/1\nf 2 4 3\n").into(), "texture"),
@@ -123,11 +123,11 @@ impl Gltf {
 
     fn glb(&self, json: &str) -> Vec<u8> {
         let mut j = json.as_bytes().to_vec();
-        while j.len() % 4 != 0 {
+        while !j.len().is_multiple_of(4) {
             j.push(b' ');
         }
         let mut b = self.bin.clone();
-        while b.len() % 4 != 0 {
+        while !b.len().is_multiple_of(4) {
             b.push(0);
         }
         let total = 12 + 8 + j.len() + 8 + b.len();
