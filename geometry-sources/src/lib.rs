@@ -18,6 +18,7 @@
 
 pub mod bvh;
 pub mod camera;
+pub mod density;
 pub mod error;
 pub mod frame;
 pub mod gltf_io;
@@ -25,6 +26,7 @@ pub mod load;
 pub(crate) mod math;
 pub mod mesh;
 pub mod mesh_source;
+pub mod npy;
 pub mod obj;
 pub mod options;
 pub mod registry;
@@ -33,6 +35,7 @@ pub(crate) mod seeding;
 pub mod source;
 #[doc(hidden)]
 pub mod testdata;
+pub mod volume;
 
 pub use error::GeometryError;
 pub use frame::{Aabb, Similarity};

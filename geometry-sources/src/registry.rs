@@ -52,6 +52,11 @@ impl SourceRegistry {
             "triangle mesh (.obj/.gltf/.glb), area-uniform or visible-surface sampling",
             crate::mesh_source::MeshSource::build,
         );
+        r.register(
+            "density",
+            "volume density grid (.npy), volume-rendering weights along camera rays",
+            crate::density::DensitySource::build,
+        );
         r
     }
 
