@@ -19,6 +19,7 @@
 pub mod bvh;
 pub mod camera;
 pub mod density;
+pub(crate) mod eigen;
 pub mod error;
 pub mod frame;
 pub mod gltf_io;
@@ -26,9 +27,12 @@ pub mod load;
 pub(crate) mod math;
 pub mod mesh;
 pub mod mesh_source;
+pub mod normals;
 pub mod npy;
 pub mod obj;
 pub mod options;
+pub mod ply;
+pub mod point_cloud;
 pub mod registry;
 pub mod sampling;
 pub(crate) mod seeding;
@@ -36,6 +40,7 @@ pub mod source;
 #[doc(hidden)]
 pub mod testdata;
 pub mod volume;
+pub mod xyz;
 
 pub use error::GeometryError;
 pub use frame::{Aabb, Similarity};

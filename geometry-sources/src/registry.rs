@@ -57,6 +57,11 @@ impl SourceRegistry {
             "volume density grid (.npy), volume-rendering weights along camera rays",
             crate::density::DensitySource::build,
         );
+        r.register(
+            "point_cloud",
+            "point cloud (.ply/.xyz), random stored points with file or estimated normals",
+            crate::point_cloud::PointCloudSource::build,
+        );
         r
     }
 
