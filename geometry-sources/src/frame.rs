@@ -16,10 +16,8 @@ impl Aabb {
         let first = *it.next()?;
         let mut bb = Aabb { min: first, max: first };
         for p in it {
-            for k in 0..3 {
-                bb.min[k] = bb.min[k].min(p[k]);
-                bb.max[k] = bb.max[k].max(p[k]);
-            }
+            bb.min = std::array::from_fn(|k| bb.min[k].min(p[k]));
+            bb.max = std::array::from_fn(|k| bb.max[k].max(p[k]));
         }
         Some(bb)
     }

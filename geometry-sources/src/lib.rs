@@ -9,16 +9,42 @@
 //! *canonical frame*: centred on the input's bounding-box centre and scaled so the longest half-extent
 //! is 1, i.e. inside `[-1, 1]^3`. [`GeometrySource::to_canonical`] is the similarity that got it there;
 //! writers apply its inverse so outputs land in the input's own coordinates.
+//!
+//! | source | input | sampling |
+//! |---|---|---|
+//! | `mesh` ([`mesh_source`]) | `.obj`, `.gltf`, `.glb` | area-uniform, or first hits of camera rays |
+//! | `point_cloud` ([`point_cloud`]) | `.ply`, `.xyz` | random stored points; normals estimated if absent |
+//! | `density` ([`density`]) | `.npy` 3-D grid | volume-rendering weights along camera rays |
 
+pub mod bvh;
+pub mod camera;
+pub mod density;
+pub(crate) mod eigen;
 pub mod error;
 pub mod frame;
+pub mod gltf_io;
+pub mod load;
+pub(crate) mod math;
 pub mod mesh;
+pub mod mesh_source;
+pub mod normals;
+pub mod npy;
 pub mod obj;
+pub mod options;
+pub mod ply;
+pub mod point_cloud;
 pub mod registry;
+pub mod sampling;
+pub(crate) mod seeding;
 pub mod source;
+#[doc(hidden)]
+pub mod testdata;
+pub mod volume;
+pub mod xyz;
 
 pub use error::GeometryError;
 pub use frame::{Aabb, Similarity};
+pub use load::load_mesh;
 pub use mesh::{TriMesh, UvLayer};
 pub use registry::{BuildContext, SourceBuilder, SourceRegistry};
 pub use source::{GeometrySource, SurfaceSamples};

@@ -1,6 +1,7 @@
 //! The triangle mesh shared by every crate that reads, bakes, exports or measures meshes.
 
 use crate::frame::{Aabb, Similarity};
+use crate::math::{add, cross, norm, normalize, sub};
 
 /// A triangle mesh, optionally with texture coordinates.
 ///
@@ -23,6 +24,10 @@ pub struct TriMesh {
 
 /// Texture coordinates indexed per triangle corner, as OBJ stores them (`f v/vt`): a vertex on a UV
 /// seam has one position and several UVs. `triangles[f][k]` indexes `coords` for corner `k` of face `f`.
+///
+/// Convention: OBJ's, with `v` pointing **up** (origin at the bottom-left of the texture image). glTF
+/// stores `v` pointing down, so [`crate::gltf_io::load_gltf`] stores `(u, 1 - v)` and a glTF writer
+/// must flip back.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct UvLayer {
     pub coords: Vec<[f32; 2]>,
@@ -58,6 +63,29 @@ impl TriMesh {
         for p in &mut self.positions {
             *p = s.apply(*p);
         }
+    }
+
+    /// Area-weighted vertex normals (unit length; zero for vertices that only touch degenerate faces
+    /// or whose incident normals cancel). Used for smooth-shaded sampling.
+    pub fn vertex_normals(&self) -> Vec<[f32; 3]> {
+        let mut acc = vec![[0.0f32; 3]; self.positions.len()];
+        for (f, t) in self.triangles.iter().enumerate() {
+            let n = self.face_normal_scaled(f);
+            for &v in t {
+                if let Some(a) = acc.get_mut(v as usize) {
+                    *a = add(*a, n);
+                }
+            }
+        }
+        acc.into_iter().map(|a| normalize(a).unwrap_or([0.0; 3])).collect()
+    }
+
+    /// True when at least one face has positive (finite) area, i.e. the surface can be sampled.
+    pub fn has_area(&self) -> bool {
+        (0..self.triangles.len()).any(|f| {
+            let a = self.face_area(f);
+            a > 0.0 && a.is_finite()
+        })
     }
 
     /// Checks the invariants listed on the type, reporting the first violation in words.
@@ -99,18 +127,6 @@ impl TriMesh {
         }
         Ok(())
     }
-}
-
-pub(crate) fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-pub(crate) fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
-pub(crate) fn norm(a: [f32; 3]) -> f32 {
-    (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
 }
 
 #[cfg(test)]

@@ -43,6 +43,15 @@ pub fn load_obj(path: &Path) -> Result<TriMesh, GeometryError> {
         ));
     }
     if faces_with_uv > 0 {
+        // tobj quietly reuses the previous texture index for a corner without one, so a file where
+        // only some faces have `vt` indices would come back with made-up UVs: check the text.
+        let (with, without) = count_faces_with_texture_indices(path)?;
+        if with > 0 && without > 0 {
+            return Err(GeometryError::malformed(
+                path,
+                format!("{with} faces have texture coordinates and {without} do not; all or none must"),
+            ));
+        }
         mesh.uv = Some(uv);
     }
     if mesh.triangles.is_empty() {
@@ -50,6 +59,25 @@ pub fn load_obj(path: &Path) -> Result<TriMesh, GeometryError> {
     }
     mesh.validate().map_err(|m| GeometryError::invalid(path, m))?;
     Ok(mesh)
+}
+
+/// Counts `f` lines whose corners all carry a `vt` index, and those with some corner without one.
+fn count_faces_with_texture_indices(path: &Path) -> Result<(usize, usize), GeometryError> {
+    let bytes = std::fs::read(path).map_err(|e| GeometryError::Io { path: path.to_path_buf(), source: e })?;
+    let text = String::from_utf8_lossy(&bytes);
+    let (mut with, mut without) = (0, 0);
+    for line in text.lines() {
+        let mut words = line.split_whitespace();
+        if words.next() != Some("f") {
+            continue;
+        }
+        if words.all(|w| w.split('/').nth(1).is_some_and(|t| !t.is_empty())) {
+            with += 1;
+        } else {
+            without += 1;
+        }
+    }
+    Ok((with, without))
 }
 
 #[cfg(test)]

@@ -46,8 +46,23 @@ impl SourceRegistry {
 
     /// A registry with every source this crate provides.
     pub fn with_builtins() -> Self {
-        // Built-in sources are registered here as they land.
-        Self::new()
+        let mut r = Self::new();
+        r.register(
+            "mesh",
+            "triangle mesh (.obj/.gltf/.glb), area-uniform or visible-surface sampling",
+            crate::mesh_source::MeshSource::build,
+        );
+        r.register(
+            "density",
+            "volume density grid (.npy), volume-rendering weights along camera rays",
+            crate::density::DensitySource::build,
+        );
+        r.register(
+            "point_cloud",
+            "point cloud (.ply/.xyz), random stored points with file or estimated normals",
+            crate::point_cloud::PointCloudSource::build,
+        );
+        r
     }
 
     /// Registers (or replaces) the source `name`.

@@ -1,0 +1,29 @@
+//! Loading any supported mesh file by its extension.
+
+use std::path::Path;
+
+use crate::error::GeometryError;
+use crate::mesh::TriMesh;
+
+/// The mesh file extensions [`load_mesh`] understands (lower case).
+pub const MESH_EXTENSIONS: &[&str] = &["obj", "gltf", "glb"];
+
+/// Reads a triangle mesh from `.obj`, `.gltf` or `.glb` (case-insensitive extension), with its UVs
+/// when the file has them for every face. The result is validated ([`TriMesh::validate`]) and has at
+/// least one face; degenerate faces are kept (see [`TriMesh::has_area`]).
+pub fn load_mesh(path: &Path) -> Result<TriMesh, GeometryError> {
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).unwrap_or_default();
+    match ext.as_str() {
+        "obj" => crate::obj::load_obj(path),
+        "gltf" | "glb" => crate::gltf_io::load_gltf(path),
+        _ => Err(GeometryError::invalid(
+            path,
+            format!("unsupported mesh extension `.{ext}`; supported: {}", dotted(MESH_EXTENSIONS)),
+        )),
+    }
+}
+
+/// `["a", "b"]` → "`.a`, `.b`".
+pub(crate) fn dotted(exts: &[&str]) -> String {
+    exts.iter().map(|e| format!("`.{e}`")).collect::<Vec<_>>().join(", ")
+}

@@ -1,0 +1,101 @@
+//! Locating the shared test data (`shared/data/` beside the workspace), for tests and benchmarks.
+//!
+//! Not part of the API: it lives in the crate only so unit tests, integration tests and examples
+//! share one rule. A test that needs the data and cannot find it **fails** with a message saying where
+//! it looked; it never skips.
+
+use std::path::PathBuf;
+
+/// `$NUVO_DATA` if set, else `<workspace root>/../shared/data`.
+pub fn data_dir() -> PathBuf {
+    match std::env::var_os("NUVO_DATA") {
+        Some(d) => PathBuf::from(d),
+        None => PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..").join("..").join("shared").join("data"),
+    }
+}
+
+/// The path of `rel` inside [`data_dir`]; panics with a clear message when it is missing (test-only).
+pub fn data_file(rel: &str) -> PathBuf {
+    let p = data_dir().join(rel);
+    assert!(
+        p.is_file(),
+        "test data {} not found; set NUVO_DATA to the folder holding meshes/, density/ and pointclouds/ \
+         (default: <workspace>/../shared/data)",
+        p.display()
+    );
+    p
+}
+
+/// Distances from points to a triangle mesh, for checking samples against the surface they should lie
+/// on: a k-d tree over dense area-uniform samples finds candidate triangles, and the exact
+/// point-triangle distance to the candidates is returned.
+pub struct MeshDistance {
+    mesh: crate::TriMesh,
+    tree: kiddo::ImmutableKdTree<f32, 3>,
+    sample_faces: Vec<u32>,
+}
+
+impl MeshDistance {
+    /// Prepares `mesh` (in whatever frame the query points will be in) with `samples` surface samples.
+    pub fn new(mesh: crate::TriMesh, samples: usize) -> MeshDistance {
+        use rand::{Rng, SeedableRng};
+        let areas = crate::sampling::uniform::AreaSampler::new(&mesh).expect("mesh with area");
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(99);
+        let mut points = Vec::with_capacity(samples);
+        let mut sample_faces = Vec::with_capacity(samples);
+        for _ in 0..samples {
+            let f = areas.face(rng.random());
+            let (b1, b2) = crate::sampling::uniform::uniform_barycentric(rng.random(), rng.random());
+            points.push(crate::sampling::point_on(&mesh, f, b1, b2));
+            sample_faces.push(f as u32);
+        }
+        let tree = kiddo::ImmutableKdTree::new_from_slice(&points);
+        MeshDistance { mesh, tree, sample_faces }
+    }
+
+    /// The distance from `p` to the nearest of the triangles owning the 8 samples nearest to `p`.
+    pub fn distance(&self, p: [f32; 3]) -> f32 {
+        let nn =
+            self.tree.nearest_n::<kiddo::SquaredEuclidean>(&p, std::num::NonZero::new(8).expect("8 > 0"));
+        nn.iter()
+            .map(|n| {
+                let f = self.sample_faces[n.item as usize] as usize;
+                point_triangle_distance(p, self.mesh.corners(f))
+            })
+            .fold(f32::INFINITY, f32::min)
+    }
+}
+
+/// Exact distance from `p` to the triangle `[a, b, c]` (closest-point construction from Ericson,
+/// *Real-Time Collision Detection*, 5.1.5).
+pub fn point_triangle_distance(p: [f32; 3], [a, b, c]: [[f32; 3]; 3]) -> f32 {
+    use crate::math::{dot, madd, norm, sub};
+    let (ab, ac, ap) = (sub(b, a), sub(c, a), sub(p, a));
+    let (d1, d2) = (dot(ab, ap), dot(ac, ap));
+    let closest = if d1 <= 0.0 && d2 <= 0.0 {
+        a
+    } else {
+        let bp = sub(p, b);
+        let (d3, d4) = (dot(ab, bp), dot(ac, bp));
+        let cp = sub(p, c);
+        let (d5, d6) = (dot(ab, cp), dot(ac, cp));
+        let vc = d1 * d4 - d3 * d2;
+        let vb = d5 * d2 - d1 * d6;
+        let va = d3 * d6 - d5 * d4;
+        if d3 >= 0.0 && d4 <= d3 {
+            b
+        } else if d6 >= 0.0 && d5 <= d6 {
+            c
+        } else if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+            madd(a, d1 / (d1 - d3), ab)
+        } else if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+            madd(a, d2 / (d2 - d6), ac)
+        } else if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+            madd(b, (d4 - d3) / ((d4 - d3) + (d5 - d6)), sub(c, b))
+        } else {
+            let denom = 1.0 / (va + vb + vc);
+            madd(madd(a, vb * denom, ab), vc * denom, ac)
+        }
+    };
+    norm(sub(p, closest))
+}
