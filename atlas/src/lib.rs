@@ -2,8 +2,13 @@
 
 pub mod camera;
 pub mod error;
+pub mod load;
+pub mod metrics;
 mod raster;
 pub mod render;
+#[cfg(test)]
+mod testmesh;
+pub mod uvstats;
 mod vecmath;
 
 pub use camera::{Camera, orbit_views};
