@@ -1,4 +1,44 @@
 //! The `nuvo` command line.
-fn main() {
-    println!("nuvo: work in progress");
+mod eval;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(name = "nuvo", version, about = "Neural UV mapping for unruly 3D representations")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Measure a mesh's UVs: the paper's Boundary/Stretch/Conformal/Editability and UV statistics.
+    Eval(eval::EvalArgs),
+}
+
+fn main() -> ExitCode {
+    let result = match Cli::parse().command {
+        Command::Eval(args) => eval::run(&args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {}", one_line(&e));
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// The error and its causes on one line, skipping a cause whose text its parent already shows.
+fn one_line(e: &anyhow::Error) -> String {
+    let mut msg = String::new();
+    for cause in e.chain().map(|c| c.to_string()) {
+        if !msg.contains(&cause) {
+            msg += if msg.is_empty() { "" } else { ": " };
+            msg += &cause;
+        }
+    }
+    msg
 }
