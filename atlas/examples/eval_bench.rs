@@ -1,15 +1,18 @@
 //! Times `evaluate` on a mesh, giving it planar-projection UVs when it has none (e.g. the
-//! 600k-triangle `unruly_vase.obj`), and times one render at the chosen resolution.
+//! 600k-triangle `unruly_vase.obj`), with a breakdown: load, one render, image metrics, UV stats.
+//! With OUT.obj, also writes the UV'd mesh there so `nuvo eval OUT.obj` can be timed end to end.
 //!
 //! ```sh
-//! cargo run --release -p nuvo-atlas --example eval_bench -- /work/shared/data/meshes/unruly_vase.obj
+//! cargo run --release -p nuvo-atlas --example eval_bench -- MESH.obj [VIEWS] [RESOLUTION] [OUT.obj]
 //! ```
 
 use std::time::Instant;
 
-use nuvo_atlas::metrics::{EvalOptions, evaluate};
+use nuvo_atlas::export::write_obj;
+use nuvo_atlas::metrics::{EvalOptions, evaluate, image_metrics};
+use nuvo_atlas::uvstats::analyse_uv;
 use nuvo_atlas::{load, orbit_views, render};
-use nuvo_geometry::{TriMesh, UvLayer};
+use nuvo_geometry::{Similarity, TriMesh, UvLayer};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let path = std::env::args().nth(1).ok_or("usage: eval_bench MESH.obj [VIEWS] [RESOLUTION]")?;
@@ -27,6 +30,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         planar_uv(&mut mesh);
         println!("no UVs: gave it the planar projection (x, y) → [0,1]²");
     }
+    if let Some(out) = std::env::args().nth(4) {
+        write_obj(out.as_ref(), &mesh, &Similarity::IDENTITY, None)?;
+        println!("wrote {out}");
+    }
     let bounds = mesh.bounds().ok_or("empty mesh")?;
     let cams = orbit_views(&bounds, views, 0, resolution, resolution);
     let mut best = f64::INFINITY;
@@ -38,6 +45,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     println!("render: best of {views} views {:.1} ms at {resolution}²", best * 1e3);
     let opts = EvalOptions { views, resolution, ..Default::default() };
+    let t = Instant::now();
+    image_metrics(&mesh, &cams, &opts.image)?;
+    println!("image metrics: {:.3} s for {views} views", t.elapsed().as_secs_f64());
+    let t = Instant::now();
+    analyse_uv(&mesh, None, opts.uv_raster)?;
+    println!("UV stats: {:.3} s at {}²", t.elapsed().as_secs_f64(), opts.uv_raster);
     let t = Instant::now();
     let m = evaluate(&mesh, &opts)?;
     println!("evaluate: {:.3} s for {views} views at {resolution}²", t.elapsed().as_secs_f64());

@@ -396,6 +396,21 @@ mod tests {
     }
 
     #[test]
+    fn stretch_of_a_rendered_map_with_half_the_triangles_doubled_in_area_is_two_thirds() {
+        // The faces left of x = 0 (half of them) get UVs scaled by √2 (2× area). Seen head-on, the
+        // plane's grid lines fall on pixel borders, so exactly half of the 200² pixels see each half:
+        // m = (1 + 2)/2 = 1.5, every pixel deviates by 1/3, Stretch = 2/3.
+        let m = grid(10, |p| [p[0], p[1]]);
+        let halves = with_uv_per_corner(&m, |f, _, uv| {
+            let left = m.corners(f).iter().all(|c| c[0] <= 0.0);
+            if left { [uv[0] * 2f32.sqrt() - 5.0, uv[1] * 2f32.sqrt()] } else { uv }
+        });
+        let r = image_metrics(&halves, &head_on(), &ImageParams::default()).unwrap();
+        assert_eq!(r.per_view[0].hit_pixels, 200 * 200);
+        assert_close("stretch", r.stretch, 2.0 / 3.0, 1e-6);
+    }
+
+    #[test]
     fn stretch_of_a_rendered_three_band_map_matches_the_hand_computed_value() {
         // Bands of columns of a 10×10 grid: x < −0.4 (30 % of the area) keeps its area, the middle
         // 40 % is scaled 2× in area, x > 0.4 (30 %) 4×. Seen head-on, pixel weight = area share.
