@@ -34,6 +34,7 @@ pub struct Baked {
     pub face_chart: Vec<u32>,
     /// Each vertex's own argmax chart (the paper's per-vertex choice), for diagnostics.
     pub vertex_chart: Vec<u32>,
+    /// What the bake found (flips, overlaps, splits).
     pub report: BakeReport,
 }
 
@@ -41,6 +42,7 @@ pub struct Baked {
 /// bake's face charts as charts and the layout's resolution as UV raster).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct BakeReport {
+    /// UV statistics of the baked layout, charts = the bake's face charts.
     pub stats: UvStats,
     /// Faces oriented against the majority of their chart, increasing ids.
     pub flipped_faces: Vec<u32>,

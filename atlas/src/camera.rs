@@ -22,12 +22,17 @@ pub const MAX_IMAGE_SIDE: u32 = 8192;
 /// `near > 0`. Geometry closer than `near` (in depth) is not drawn.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Camera {
+    /// Centre of projection.
     pub eye: [f32; 3],
+    /// The point the optical axis goes through (image centre).
     pub target: [f32; 3],
+    /// A direction that appears upwards in the image (need not be orthogonal to the view).
     pub up: [f32; 3],
     /// Vertical field of view in degrees.
     pub fov_y_deg: f32,
+    /// Image width in pixels.
     pub width: u32,
+    /// Image height in pixels.
     pub height: u32,
     /// Near clipping depth.
     pub near: f32,

@@ -13,26 +13,49 @@ pub enum AtlasError {
     Geometry(#[from] GeometryError),
     /// The mesh has no texture coordinates, but the operation measures or exports them.
     #[error("{what}: the mesh has no texture coordinates (UVs); give a mesh whose faces carry UVs")]
-    NoUv { what: String },
+    NoUv {
+        /// The file, or `mesh` for an in-memory mesh.
+        what: String,
+    },
     /// The file extension is not one this crate can read.
     #[error("{path}: unsupported mesh format {ext:?}; supported: .obj")]
-    UnsupportedFormat { path: PathBuf, ext: String },
+    UnsupportedFormat {
+        /// The file.
+        path: PathBuf,
+        /// Its extension, lower-cased.
+        ext: String,
+    },
     /// Writing an output file failed. Nothing is left at `path` (writes are atomic).
     #[error("cannot write {path}: {source}")]
     Write {
+        /// The destination.
         path: PathBuf,
+        /// Why.
         #[source]
         source: std::io::Error,
     },
     /// Encoding an output (PNG, glTF) failed before anything was written.
     #[error("cannot encode {path}: {message}")]
-    Encode { path: PathBuf, message: String },
+    Encode {
+        /// The destination.
+        path: PathBuf,
+        /// What the encoder said.
+        message: String,
+    },
     /// An argument is out of its documented domain (array shapes, resolutions, cameras...).
     #[error("invalid {what}: {message}")]
-    Invalid { what: &'static str, message: String },
+    Invalid {
+        /// Which argument.
+        what: &'static str,
+        /// What is wrong with it.
+        message: String,
+    },
     /// No camera saw any surface, so image-space metrics are undefined.
     #[error("no view sees any surface of the mesh (all {views} views are empty); is the mesh degenerate?")]
-    NothingVisible { views: usize },
+    NothingVisible {
+        /// How many views were rendered.
+        views: usize,
+    },
 }
 
 impl AtlasError {

@@ -343,7 +343,9 @@ fn bounds(points: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
     if points.is_empty() { ([0.0; 3], [0.0; 3]) } else { (lo, hi) }
 }
 
+/// The UV layer of a valid mesh (indices in range), naming `path` in the errors.
 fn uv_of<'a>(mesh: &'a TriMesh, path: &Path) -> Result<&'a UvLayer, AtlasError> {
+    mesh.validate().map_err(|m| AtlasError::invalid("mesh", format!("{}: {m}", path.display())))?;
     mesh.uv.as_ref().ok_or_else(|| AtlasError::NoUv { what: path.display().to_string() })
 }
 

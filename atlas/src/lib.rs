@@ -5,11 +5,11 @@
 //!
 //! | module | what |
 //! |---|---|
-//! | [`bake`] | per-vertex chart probabilities + chart UVs → one UV layer in the packed atlas |
+//! | [`mod@bake`] | per-vertex chart probabilities + chart UVs → one UV layer in the packed atlas |
 //! | [`pack`] | grid packing of the `n` square charts, with gutters, as affine maps |
 //! | [`export`] | OBJ + MTL and binary glTF writers, in the input's own coordinates |
 //! | [`pictures`] | UV layout, labelled checkerboard, textured renders, chart-grid (normal) PNGs |
-//! | [`render`], [`camera`] | z-buffer rasteriser producing triangle id / barycentrics / depth |
+//! | [`mod@render`], [`camera`] | z-buffer rasteriser producing triangle id / barycentrics / depth |
 //! | [`metrics`] | Boundary, Stretch, Conformal, Editability over seeded views (definitions there) |
 //! | [`uvstats`] | charts, flips, utilisation and overlaps of a UV layout |
 //! | [`load`] | choosing the mesh reader by extension |
@@ -17,6 +17,8 @@
 //!
 //! The exact metric definitions and defaults are in the [`metrics`] and [`uvstats`] module docs and
 //! in `atlas/README.md`.
+
+#![warn(missing_docs)]
 
 pub mod bake;
 pub mod camera;

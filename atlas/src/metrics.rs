@@ -1,7 +1,7 @@
 //! The paper's UV metrics (Nuvo, CVPR 2024, main text §"Metrics" and supplementary §"Metrics"),
 //! computed from renders of the mesh over a set of views.
 //!
-//! Every view is rendered with [`crate::render`]; each *hit pixel* sees one triangle `f` and has the
+//! Every view is rendered with [`crate::render()`]; each *hit pixel* sees one triangle `f` and has the
 //! UV interpolated (perspective-correctly) at the visible point. Per view:
 //!
 //! - **Boundary** = 1 − (boundary pixels / hit pixels). A hit pixel is a *boundary pixel* when, for
@@ -94,31 +94,45 @@ impl Default for ImageParams {
 /// Scores of one view.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ViewScores {
+    /// Pixels that see the mesh.
     pub hit_pixels: usize,
+    /// Hit pixels on a chart boundary.
     pub boundary_pixels: usize,
+    /// `1 − boundary_pixels / hit_pixels`.
     pub boundary: f64,
+    /// Stretch score of this view.
     pub stretch: f64,
+    /// Conformal score of this view.
     pub conformal: f64,
+    /// `boundary · (stretch + conformal) / 2`.
     pub editability: f64,
 }
 
 /// Image-space scores, averaged over the views that measured something.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ImageMetrics {
+    /// Mean Boundary over the views used.
     pub boundary: f64,
+    /// Mean Stretch over the views used.
     pub stretch: f64,
+    /// Mean Conformal over the views used.
     pub conformal: f64,
+    /// Mean per-view Editability over the views used.
     pub editability: f64,
     /// Views that contributed (a view seeing nothing measurable is skipped).
     pub views_used: usize,
+    /// The scores of each view used, in camera order.
     pub per_view: Vec<ViewScores>,
 }
 
 /// Everything `nuvo eval` reports.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Metrics {
+    /// The image-space scores.
     pub image: ImageMetrics,
+    /// The UV-space statistics.
     pub uv: UvStats,
+    /// The options that produced these numbers.
     pub options: EvalOptions,
 }
 
@@ -155,7 +169,6 @@ impl ImageParams {
 /// views plus the UV-space statistics. Errors: no UVs, an invalid mesh or options, nothing visible.
 pub fn evaluate(mesh: &TriMesh, opts: &EvalOptions) -> Result<Metrics, AtlasError> {
     opts.check()?;
-    mesh.validate().map_err(|m| AtlasError::invalid("mesh", m))?;
     require_uv(mesh)?;
     let bounds = mesh.bounds().ok_or(AtlasError::NothingVisible { views: opts.views })?;
     let cameras = orbit_views(&bounds, opts.views, opts.seed, opts.resolution, opts.resolution);
@@ -481,6 +494,17 @@ mod tests {
         assert!(matches!(evaluate(&m, &bad), Err(AtlasError::Invalid { .. })));
         m.uv = None;
         assert!(matches!(evaluate(&m, &EvalOptions::default()), Err(AtlasError::NoUv { .. })));
+    }
+
+    #[test]
+    fn out_of_range_indices_are_errors_not_panics() {
+        let mut m = grid(2, |p| [p[0], p[1]]);
+        m.uv.as_mut().unwrap().triangles[3][1] = 999;
+        assert!(matches!(evaluate(&m, &EvalOptions::default()), Err(AtlasError::Invalid { .. })));
+        assert!(analyse_uv(&m, None, 16).is_err());
+        m.triangles[0][0] = 999;
+        assert!(render(&m, &plane_views(8)[0]).is_err());
+        assert!(crate::pictures::uv_layout(&m, None, 16).is_err());
     }
 
     #[test]

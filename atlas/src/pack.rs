@@ -19,7 +19,9 @@ use crate::error::AtlasError;
 /// Where one chart lands: `atlas_uv = offset + scale · chart_uv`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct ChartPlacement {
+    /// Side of the chart square in atlas UV units.
     pub scale: f32,
+    /// Atlas UV of the chart's `(0, 0)` corner.
     pub offset: [f32; 2],
     /// The chart square in atlas texels: left column, top row (row 0 at `v = 1`), side.
     pub texels: [u32; 3],
@@ -29,10 +31,15 @@ pub struct ChartPlacement {
 /// lies inside `[0,1]²`, squares are disjoint and at least `2·gutter` texels apart.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct AtlasLayout {
+    /// Atlas side in texels.
     pub resolution: u32,
+    /// Texels kept free around every chart square.
     pub gutter: u32,
+    /// Grid columns.
     pub columns: u32,
+    /// Grid rows (used ones).
     pub rows: u32,
+    /// Where each chart goes, by chart index.
     pub charts: Vec<ChartPlacement>,
 }
 

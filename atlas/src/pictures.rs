@@ -170,8 +170,11 @@ pub fn render_textured(
 /// `[-1, 1]`, row-major, row 0 at `v = 0`, column 0 at `u = 0`.
 #[derive(Clone, Copy, Debug)]
 pub struct ChartGrid<'a> {
+    /// Texels along u.
     pub width: usize,
+    /// Texels along v.
     pub height: usize,
+    /// `height × width × 3` values.
     pub values: &'a [f32],
 }
 

@@ -1,4 +1,4 @@
-//! The one triangle rasteriser of the crate, shared by the screen-space renderer ([`crate::render`]),
+//! The one triangle rasteriser of the crate, shared by the screen-space renderer ([`mod@crate::render`]),
 //! the UV-space coverage raster ([`crate::uvstats`]) and the UV layout picture
 //! ([`crate::pictures`]). They are the same operation: "which pixel centres does this 2-D triangle
 //! cover, and with which barycentrics", followed by a per-pixel update that differs.

@@ -41,8 +41,11 @@ impl Pixel {
 /// A rendered view: `width × height` pixels, row-major, row 0 at the top.
 #[derive(Clone, Debug, PartialEq)]
 pub struct GBuffer {
+    /// Image width in pixels.
     pub width: u32,
+    /// Image height in pixels.
     pub height: u32,
+    /// `width × height` pixels, row-major.
     pub pixels: Vec<Pixel>,
 }
 
@@ -59,9 +62,11 @@ impl GBuffer {
 }
 
 /// Renders `mesh` (any frame: the camera is in the same one) from `camera`. Fails only on an invalid
-/// camera. Cost: one pass over the vertices and one over the triangles, parallel over row bands.
+/// camera or mesh. Cost: one pass over the vertices and one over the triangles, parallel over row
+/// bands.
 pub fn render(mesh: &TriMesh, camera: &Camera) -> Result<GBuffer, AtlasError> {
     camera.check()?;
+    mesh.validate().map_err(|m| AtlasError::invalid("mesh", m))?;
     let proj = Projector::new(camera);
     // [x, y, 1/depth] per vertex, or None when in front of the near plane.
     let screen: Vec<Option<[f32; 3]>> =

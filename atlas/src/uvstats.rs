@@ -1,6 +1,6 @@
 //! UV-space properties of a mesh's texture coordinates: charts, flips, utilisation and overlaps.
 //! These need no camera; [`crate::metrics`] reports them next to the image-space scores and
-//! [`crate::bake`] uses them to check its own output.
+//! [`crate::bake()`] uses them to check its own output.
 //!
 //! Definitions (exact):
 //! - **Charts**: connected components of faces, two faces being connected when they share a mesh
@@ -40,6 +40,7 @@ pub const DEFAULT_UV_RASTER: u32 = 1024;
 /// Face-level summary of a UV layout. Serialised as part of the `nuvo eval` JSON.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct UvStats {
+    /// Number of faces.
     pub faces: usize,
     /// Number of charts (the labelling given, or UV-connected components; module docs).
     pub charts: usize,
@@ -64,6 +65,7 @@ pub struct UvStats {
 /// [`UvStats`] plus the per-face evidence behind it, for callers that act on faces (the baker).
 #[derive(Clone, Debug, PartialEq)]
 pub struct UvAnalysis {
+    /// The summary.
     pub stats: UvStats,
     /// Chart of each face.
     pub face_chart: Vec<u32>,
@@ -75,8 +77,10 @@ pub struct UvAnalysis {
     pub degenerate_uv: Vec<u32>,
 }
 
-/// The UV layer of `mesh`, or [`AtlasError::NoUv`].
+/// The UV layer of `mesh` once the mesh passed [`TriMesh::validate`] (so every index is in range
+/// and nothing below can panic on it), else [`AtlasError::Invalid`] or [`AtlasError::NoUv`].
 pub fn require_uv(mesh: &TriMesh) -> Result<&UvLayer, AtlasError> {
+    mesh.validate().map_err(|m| AtlasError::invalid("mesh", m))?;
     mesh.uv.as_ref().ok_or_else(|| AtlasError::NoUv { what: "mesh".into() })
 }
 
