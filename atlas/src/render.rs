@@ -130,6 +130,35 @@ mod tests {
     }
 
     #[test]
+    fn a_known_triangle_covers_its_half_of_the_square() {
+        // (-2,-2), (2,-2), (-2,2) → pixels (30,70), (70,70), (30,30): the lower-left half of the
+        // square 30..70, hypotenuse on the pixel-centre diagonal x = y.
+        let m = TriMesh {
+            positions: vec![[-2.0, -2.0, 0.0], [2.0, -2.0, 0.0], [-2.0, 2.0, 0.0]],
+            triangles: vec![[0, 1, 2]],
+            uv: None,
+        };
+        let g = render(&m, &front_camera()).unwrap();
+        let mut diagonal = 0;
+        for y in 0..100u32 {
+            for x in 0..100u32 {
+                let p = g.get(x, y);
+                let in_square = (30..70).contains(&x) && (30..70).contains(&y);
+                if in_square && y > x {
+                    assert_eq!(p.tri, 0, "pixel {x},{y} strictly inside is not covered");
+                    assert!((p.depth - 5.0).abs() < 1e-5);
+                } else if in_square && x == y {
+                    diagonal += p.hit().is_some() as usize; // on the edge: owned by one side
+                } else {
+                    assert!(p.hit().is_none(), "pixel {x},{y} outside is covered");
+                }
+            }
+        }
+        assert!(diagonal == 0 || diagonal == 40, "the edge rule must treat the whole edge alike");
+        assert_eq!(g.hit_count(), 780 + diagonal);
+    }
+
+    #[test]
     fn the_nearer_surface_wins_whatever_the_order_and_winding() {
         let far = square(0.0, 2.0);
         let mut near = square(1.0, 1.0);
