@@ -1,1 +1,45 @@
-//! Placeholder: see ARCHITECTURE.md.
+//! nuvo-atlas: everything that starts from a mesh and its UVs — baking Nuvo's charts onto a mesh,
+//! packing them into one atlas, writing OBJ/MTL and GLB, drawing pictures, and measuring the
+//! paper's metrics with a software renderer. It does not depend on the trainer: its inputs are a
+//! [`nuvo_geometry::TriMesh`] and plain arrays.
+//!
+//! | module | what |
+//! |---|---|
+//! | [`mod@bake`] | per-vertex chart probabilities + chart UVs → one UV layer in the packed atlas |
+//! | [`pack`] | grid packing of the `n` square charts, with gutters, as affine maps |
+//! | [`export`] | OBJ + MTL and binary glTF writers, in the input's own coordinates |
+//! | [`pictures`] | UV layout, labelled checkerboard, textured renders, chart-grid (normal) PNGs |
+//! | [`mod@render`], [`camera`] | z-buffer rasteriser producing triangle id / barycentrics / depth |
+//! | [`metrics`] | Boundary, Stretch, Conformal, Editability over seeded views (definitions there) |
+//! | [`uvstats`] | charts, flips, utilisation and overlaps of a UV layout |
+//! | [`load`] | choosing the mesh reader by extension |
+//! | [`fsio`] | atomic file writes |
+//!
+//! The exact metric definitions and defaults are in the [`metrics`] and [`uvstats`] module docs and
+//! in `atlas/README.md`.
+
+#![warn(missing_docs)]
+
+pub mod bake;
+pub mod camera;
+pub mod error;
+pub mod export;
+mod font;
+pub mod fsio;
+pub mod load;
+pub mod metrics;
+pub mod pack;
+pub mod pictures;
+mod raster;
+pub mod render;
+#[cfg(test)]
+mod testmesh;
+pub mod uvstats;
+mod vecmath;
+
+pub use bake::{Baked, bake};
+pub use camera::{Camera, orbit_views};
+pub use error::AtlasError;
+pub use metrics::{EvalOptions, Metrics, evaluate};
+pub use pack::AtlasLayout;
+pub use render::{GBuffer, Pixel, render};

@@ -2,6 +2,9 @@
 
 mod bench;
 mod demo;
+mod eval;
+
+use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
@@ -15,15 +18,37 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Measure a mesh's UVs: the paper's Boundary/Stretch/Conformal/Editability and UV statistics.
+    Eval(eval::EvalArgs),
     /// Fit a small MLP to a known function with the autodiff engine and report the error.
     Demo(demo::DemoArgs),
     /// Measure the engine: MLP forward+backward steps and raw GEMM throughput.
     Bench(bench::BenchArgs),
 }
 
-fn main() -> anyhow::Result<()> {
-    match Cli::parse().command {
+fn main() -> ExitCode {
+    let result = match Cli::parse().command {
+        Command::Eval(args) => eval::run(&args),
         Command::Demo(args) => demo::run(&args),
         Command::Bench(args) => bench::run(&args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {}", one_line(&e));
+            ExitCode::FAILURE
+        }
     }
+}
+
+/// The error and its causes on one line, skipping a cause whose text its parent already shows.
+fn one_line(e: &anyhow::Error) -> String {
+    let mut msg = String::new();
+    for cause in e.chain().map(|c| c.to_string()) {
+        if !msg.contains(&cause) {
+            msg += if msg.is_empty() { "" } else { ": " };
+            msg += &cause;
+        }
+    }
+    msg
 }

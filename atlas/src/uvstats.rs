@@ -1,0 +1,350 @@
+//! UV-space properties of a mesh's texture coordinates: charts, flips, utilisation and overlaps.
+//! These need no camera; [`crate::metrics`] reports them next to the image-space scores and
+//! [`crate::bake()`] uses them to check its own output.
+//!
+//! Definitions (exact):
+//! - **Charts**: connected components of faces, two faces being connected when they share a mesh
+//!   edge (same two vertex indices) whose UVs at both ends are equal (same coordinate values). Faces
+//!   that do not share vertex indices are never connected, so unwelded meshes have more charts.
+//! - **Degenerate UV face**: |UV area| ≤ [`DEGENERATE_UV_AREA`]. Not classified as flipped or not.
+//! - **Flipped face**: a non-degenerate face whose signed UV area (corners in the face's order) has
+//!   the sign opposite to its chart's majority, the majority being the sign carrying more total UV
+//!   area in the chart (ties: counter-clockwise). `flipped_fraction` = flipped faces / all faces.
+//!   This assumes the 3-D winding is consistent inside a chart, as it is for every mesh in the test
+//!   data (a winding error inside a chart would show up as a flip).
+//! - **UV raster**: the unit square `[0,1]²` split into `R × R` texels, a texel covered by a face
+//!   when its centre is (rasteriser coverage rule: a centre on an edge shared by two faces belongs
+//!   to exactly one, so shared edges never count as overlap). UV outside `[0,1]²` is not counted.
+//! - **Utilisation**: covered texels / `R²`.
+//! - **Overlap fraction**: texels covered by ≥ 2 faces / covered texels. A face *overlaps* when at
+//!   least one of its texels is covered by another face. Faces smaller than a texel may escape
+//!   detection: that is the resolution of the measure.
+
+use nuvo_geometry::{TriMesh, UvLayer};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::error::AtlasError;
+use crate::raster::{Tri2, raster_parallel, rasterize_triangle};
+use crate::vecmath::{cross, norm, signed_area2_2d, sub, v3};
+
+/// UV area at or below which a face counts as degenerate in UV (not flipped, not measurable).
+pub const DEGENERATE_UV_AREA: f64 = 1e-12;
+/// 3-D area, relative to the squared bounding-box diagonal, at or below which a face counts as
+/// degenerate in 3-D. Degenerate faces are skipped by the distortion metrics (their stretch would be
+/// a division by zero).
+pub const DEGENERATE_AREA_REL: f64 = 1e-12;
+/// Default side of the UV raster, in texels.
+pub const DEFAULT_UV_RASTER: u32 = 1024;
+
+/// Face-level summary of a UV layout. Serialised as part of the `nuvo eval` JSON.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct UvStats {
+    /// Number of faces.
+    pub faces: usize,
+    /// Number of charts (the labelling given, or UV-connected components; module docs).
+    pub charts: usize,
+    /// Fraction of `[0,1]²` covered by at least one face, on the UV raster.
+    pub utilisation: f64,
+    /// Fraction of covered UV raster texels covered more than once.
+    pub overlap_fraction: f64,
+    /// Faces covering at least one texel that another face also covers.
+    pub overlapping_faces: usize,
+    /// Faces oriented against their chart's majority.
+    pub flipped_faces: usize,
+    /// `flipped_faces / faces`.
+    pub flipped_fraction: f64,
+    /// Faces of (near) zero UV area.
+    pub degenerate_uv_faces: usize,
+    /// Faces of (near) zero 3-D area.
+    pub degenerate_3d_faces: usize,
+    /// Side of the UV raster used for utilisation and overlap.
+    pub raster_resolution: u32,
+}
+
+/// [`UvStats`] plus the per-face evidence behind it, for callers that act on faces (the baker).
+#[derive(Clone, Debug, PartialEq)]
+pub struct UvAnalysis {
+    /// The summary.
+    pub stats: UvStats,
+    /// Chart of each face.
+    pub face_chart: Vec<u32>,
+    /// Ids of flipped faces, increasing.
+    pub flipped: Vec<u32>,
+    /// Ids of overlapping faces, increasing.
+    pub overlapping: Vec<u32>,
+    /// Ids of faces that are degenerate in UV, increasing.
+    pub degenerate_uv: Vec<u32>,
+}
+
+/// The UV layer of `mesh` once the mesh passed [`TriMesh::validate`] (so every index is in range
+/// and nothing below can panic on it), else [`AtlasError::Invalid`] or [`AtlasError::NoUv`].
+pub fn require_uv(mesh: &TriMesh) -> Result<&UvLayer, AtlasError> {
+    mesh.validate().map_err(|m| AtlasError::invalid("mesh", m))?;
+    mesh.uv.as_ref().ok_or_else(|| AtlasError::NoUv { what: "mesh".into() })
+}
+
+/// Analyses the UVs of `mesh`. `face_chart` labels faces with charts (e.g. the baker's chart
+/// choice, labels `< max+1`); `None` uses the UV-connected components. `resolution` is the UV
+/// raster side (≥ 1).
+pub fn analyse_uv(
+    mesh: &TriMesh,
+    face_chart: Option<&[u32]>,
+    resolution: u32,
+) -> Result<UvAnalysis, AtlasError> {
+    let uv = require_uv(mesh)?;
+    if resolution == 0 || resolution > crate::camera::MAX_IMAGE_SIDE {
+        return Err(AtlasError::invalid("UV raster resolution", format!("{resolution} is out of range")));
+    }
+    let (face_chart, charts) = match face_chart {
+        Some(fc) if fc.len() != mesh.triangles.len() => {
+            return Err(AtlasError::invalid(
+                "face charts",
+                format!("{} labels for {} faces", fc.len(), mesh.triangles.len()),
+            ));
+        }
+        Some(fc) => (fc.to_vec(), fc.iter().max().map_or(0, |&m| m as usize + 1)),
+        None => uv_charts(mesh, uv),
+    };
+    let area2 = signed_uv_area2(uv);
+    let degenerate_uv: Vec<u32> = ids(area2.iter().map(|a| a.abs() * 0.5 <= DEGENERATE_UV_AREA));
+    let flipped = flipped_faces(&area2, &face_chart, charts);
+    let counts = uv_coverage(uv, resolution);
+    let overlapping = overlapping_faces(uv, &counts, resolution);
+    let covered = counts.iter().filter(|&&c| c >= 1).count();
+    let multiple = counts.iter().filter(|&&c| c >= 2).count();
+    let faces = mesh.triangles.len();
+    let stats = UvStats {
+        faces,
+        charts,
+        utilisation: covered as f64 / (resolution as f64).powi(2),
+        overlap_fraction: if covered == 0 { 0.0 } else { multiple as f64 / covered as f64 },
+        overlapping_faces: overlapping.len(),
+        flipped_faces: flipped.len(),
+        flipped_fraction: if faces == 0 { 0.0 } else { flipped.len() as f64 / faces as f64 },
+        degenerate_uv_faces: degenerate_uv.len(),
+        degenerate_3d_faces: degenerate_3d_faces(mesh).iter().filter(|&&d| d).count(),
+        raster_resolution: resolution,
+    };
+    Ok(UvAnalysis { stats, face_chart, flipped, overlapping, degenerate_uv })
+}
+
+/// UV-connected components of the faces (module docs): `(chart of each face, number of charts)`,
+/// charts numbered in order of their first face.
+pub fn uv_charts(mesh: &TriMesh, uv: &UvLayer) -> (Vec<u32>, usize) {
+    // (edge key, face, uv at the lower vertex, uv at the higher vertex), sorted by key.
+    let mut edges: Vec<EdgeUse> = Vec::with_capacity(mesh.triangles.len() * 3);
+    for (f, (t, tu)) in mesh.triangles.iter().zip(&uv.triangles).enumerate() {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            let (ua, ub) = (uv.coords[tu[k] as usize], uv.coords[tu[(k + 1) % 3] as usize]);
+            match a.cmp(&b) {
+                std::cmp::Ordering::Less => edges.push(((a, b), f as u32, ua, ub)),
+                std::cmp::Ordering::Greater => edges.push(((b, a), f as u32, ub, ua)),
+                std::cmp::Ordering::Equal => {} // a collapsed edge connects nothing
+            }
+        }
+    }
+    edges.par_sort_unstable_by_key(|e| (e.0, e.1));
+    let mut dsu = Dsu::new(mesh.triangles.len());
+    for group in edges.chunk_by(|x, y| x.0 == y.0) {
+        for (i, x) in group.iter().enumerate() {
+            for y in &group[i + 1..] {
+                if x.2 == y.2 && x.3 == y.3 {
+                    dsu.union(x.1, y.1);
+                }
+            }
+        }
+    }
+    let mut label = vec![u32::MAX; mesh.triangles.len()];
+    let mut out = Vec::with_capacity(mesh.triangles.len());
+    let mut count = 0u32;
+    for f in 0..mesh.triangles.len() as u32 {
+        let r = dsu.find(f) as usize;
+        if label[r] == u32::MAX {
+            label[r] = count;
+            count += 1;
+        }
+        out.push(label[r]);
+    }
+    (out, count as usize)
+}
+
+/// One face's use of a mesh edge: (sorted vertex pair, face, UV at the lower vertex, UV at the
+/// higher vertex).
+type EdgeUse = ((u32, u32), u32, [f32; 2], [f32; 2]);
+
+/// Twice the signed UV area of every face.
+pub(crate) fn signed_uv_area2(uv: &UvLayer) -> Vec<f64> {
+    uv.triangles
+        .par_iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|i| uv.coords[i as usize]);
+            signed_area2_2d(a, b, c)
+        })
+        .collect()
+}
+
+/// Whether each face is degenerate in 3-D ([`DEGENERATE_AREA_REL`]).
+pub(crate) fn degenerate_3d_faces(mesh: &TriMesh) -> Vec<bool> {
+    let diag2 = mesh.bounds().map_or(0.0, |b| {
+        let d = sub(v3(b.max), v3(b.min));
+        d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+    });
+    let eps = DEGENERATE_AREA_REL * diag2;
+    (0..mesh.triangles.len())
+        .into_par_iter()
+        .map(|f| {
+            let [a, b, c] = mesh.corners(f).map(v3);
+            let area = 0.5 * norm(cross(sub(b, a), sub(c, a)));
+            area.is_nan() || area <= eps
+        })
+        .collect()
+}
+
+/// Faces whose orientation disagrees with their chart's area-weighted majority (module docs).
+fn flipped_faces(area2: &[f64], face_chart: &[u32], charts: usize) -> Vec<u32> {
+    let mut balance = vec![0.0f64; charts];
+    for (&a, &c) in area2.iter().zip(face_chart) {
+        balance[c as usize] += a;
+    }
+    ids(area2.iter().zip(face_chart).map(|(&a, &c)| {
+        let degenerate = a.abs() * 0.5 <= DEGENERATE_UV_AREA;
+        let majority_ccw = balance[c as usize] >= 0.0;
+        !degenerate && ((a > 0.0) != majority_ccw)
+    }))
+}
+
+/// The UV triangle of face `f` in raster pixels of an `r × r` image of `[0,1]²` (v up, row 0 at
+/// `v = 1`): the one UV-to-pixel convention of the crate, shared with the layout picture.
+pub(crate) fn uv_pixels(uv: &UvLayer, f: usize, r: u32) -> Tri2 {
+    uv.triangles[f].map(|i| uv_to_pixel(uv.coords[i as usize], r))
+}
+
+/// `[u, v]` → `[x, y]` pixel coordinates on an `r × r` image of `[0,1]²`, v up.
+pub(crate) fn uv_to_pixel(p: [f32; 2], r: u32) -> [f32; 2] {
+    [p[0] * r as f32, (1.0 - p[1]) * r as f32]
+}
+
+/// How many faces cover each texel of the `r × r` UV raster (saturating at `u16::MAX`).
+pub(crate) fn uv_coverage(uv: &UvLayer, r: u32) -> Vec<u16> {
+    let mut counts = vec![0u16; r as usize * r as usize];
+    raster_parallel(
+        r,
+        r,
+        &mut counts,
+        uv.triangles.len(),
+        |f| Some(uv_pixels(uv, f, r)),
+        |c, _, _| *c = c.saturating_add(1),
+    );
+    counts
+}
+
+/// Faces covering a texel whose count is ≥ 2.
+fn overlapping_faces(uv: &UvLayer, counts: &[u16], r: u32) -> Vec<u32> {
+    let flags: Vec<bool> = (0..uv.triangles.len())
+        .into_par_iter()
+        .map(|f| {
+            let mut hit = false;
+            rasterize_triangle(uv_pixels(uv, f, r), r, 0..r, |x, y, _| {
+                hit |= counts[(y * r + x) as usize] >= 2;
+            });
+            hit
+        })
+        .collect();
+    ids(flags.into_iter())
+}
+
+fn ids(flags: impl Iterator<Item = bool>) -> Vec<u32> {
+    flags.enumerate().filter_map(|(i, b)| b.then_some(i as u32)).collect()
+}
+
+/// Union–find with path halving; unions keep the smaller root so labels are order-independent.
+struct Dsu(Vec<u32>);
+
+impl Dsu {
+    fn new(n: usize) -> Self {
+        Dsu((0..n as u32).collect())
+    }
+    fn find(&mut self, mut x: u32) -> u32 {
+        while self.0[x as usize] != x {
+            let p = self.0[x as usize];
+            self.0[x as usize] = self.0[p as usize];
+            x = p;
+        }
+        x
+    }
+    fn union(&mut self, a: u32, b: u32) {
+        let (ra, rb) = (self.find(a), self.find(b));
+        let (lo, hi) = (ra.min(rb), ra.max(rb));
+        self.0[hi as usize] = lo;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testmesh::{grid, with_uv_per_corner};
+
+    #[test]
+    fn a_unit_square_fills_the_raster_once_without_overlap() {
+        let m = grid(4, |p| [(p[0] + 1.0) * 0.5, (p[1] + 1.0) * 0.5]);
+        let a = analyse_uv(&m, None, 64).unwrap();
+        assert_eq!(a.stats.charts, 1);
+        assert_eq!(a.stats.utilisation, 1.0);
+        assert_eq!(a.stats.overlap_fraction, 0.0);
+        assert_eq!(a.stats.overlapping_faces, 0);
+        assert_eq!(a.stats.flipped_faces, 0);
+        assert_eq!(a.stats.degenerate_uv_faces, 0);
+    }
+
+    #[test]
+    fn a_seam_makes_two_charts_and_scattering_makes_one_per_face() {
+        // Corners of faces left of x = 0 are shifted in UV: the column of edges at x = 0 is a seam.
+        let m = grid(4, |p| [(p[0] + 1.0) * 0.25, (p[1] + 1.0) * 0.5]);
+        let seamed = with_uv_per_corner(&m, |f, _, uv| {
+            let left = m.corners(f).iter().all(|c| c[0] <= 0.0);
+            if left { [uv[0] + 0.5, uv[1]] } else { uv }
+        });
+        assert_eq!(analyse_uv(&seamed, None, 32).unwrap().stats.charts, 2);
+        let scattered = with_uv_per_corner(&m, |f, _, uv| [uv[0] + f as f32, uv[1]]);
+        assert_eq!(analyse_uv(&scattered, None, 32).unwrap().stats.charts, m.triangles.len());
+    }
+
+    #[test]
+    fn a_fold_reports_the_minority_as_flipped_and_overlapping() {
+        // u = |x - 0.5| folds the plane along x = 0.5: the strip x > 0.5 (1/4 of the faces) is
+        // mirrored relative to the rest of its (single) chart and lands on top of it in UV.
+        let m = grid(8, |p| [(p[0] - 0.5).abs() * 0.6, (p[1] + 1.0) * 0.5]);
+        let a = analyse_uv(&m, None, 128).unwrap();
+        assert_eq!(a.stats.charts, 1);
+        assert_eq!(a.stats.flipped_faces, m.triangles.len() / 4);
+        assert!((a.stats.flipped_fraction - 0.25).abs() < 1e-12);
+        for &f in &a.flipped {
+            assert!(m.corners(f as usize).iter().all(|c| c[0] >= 0.5), "face {f} is not in the fold");
+        }
+        // The folded strip covers 1/3 of the used UV area twice.
+        assert!((a.stats.overlap_fraction - 1.0 / 3.0).abs() < 0.02, "{}", a.stats.overlap_fraction);
+        assert!(a.stats.overlapping_faces >= m.triangles.len() / 2);
+    }
+
+    #[test]
+    fn degenerate_faces_are_reported_not_flipped() {
+        let mut m = grid(2, |p| [(p[0] + 1.0) * 0.5, (p[1] + 1.0) * 0.5]);
+        let uv = m.uv.as_mut().unwrap();
+        let t = uv.triangles[0];
+        uv.coords.push(uv.coords[t[0] as usize]);
+        uv.triangles[0] = [t[0], uv.coords.len() as u32 - 1, t[2]]; // two equal corners: zero area
+        let a = analyse_uv(&m, None, 16).unwrap();
+        assert_eq!(a.degenerate_uv, vec![0]);
+        assert_eq!(a.stats.flipped_faces, 0);
+    }
+
+    #[test]
+    fn missing_uvs_and_bad_labels_are_errors() {
+        let mut m = grid(2, |p| [p[0], p[1]]);
+        assert!(analyse_uv(&m, Some(&[0, 1]), 16).is_err());
+        m.uv = None;
+        assert!(matches!(analyse_uv(&m, None, 16), Err(AtlasError::NoUv { .. })));
+    }
+}

@@ -1,0 +1,96 @@
+//! `nuvo eval` as a process: exit codes and messages on good and bad input.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn nuvo(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_nuvo")).args(args).output().expect("the nuvo binary runs")
+}
+
+/// `$NUVO_DATA`, else `<workspace>/../shared/data`; missing data fails the test.
+fn data(rel: &str) -> PathBuf {
+    let root = std::env::var_os("NUVO_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data"));
+    let p = root.join(rel);
+    assert!(p.is_file(), "test data {} is missing: set NUVO_DATA to the shared data folder", p.display());
+    p
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+#[test]
+fn a_missing_file_fails_naming_it() {
+    let o = nuvo(&["eval", "/nonexistent/nothing-here.obj"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("nothing-here.obj"), "{}", stderr(&o));
+}
+
+#[test]
+fn a_mesh_without_uvs_fails_naming_it() {
+    let p = data("meshes/stanford-bunny.obj");
+    let o = nuvo(&["eval", p.to_str().unwrap()]);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(e.contains("stanford-bunny.obj") && e.contains("no texture coordinates"), "{e}");
+}
+
+#[test]
+fn garbage_and_unknown_formats_fail_naming_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let garbage = dir.path().join("garbage.obj");
+    std::fs::write(&garbage, [0u8, 159, 146, 150, 255, 10, 102, 32, 49, 10]).unwrap();
+    let o = nuvo(&["eval", garbage.to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("garbage.obj"), "{}", stderr(&o));
+    let other = dir.path().join("mesh.ply");
+    std::fs::write(&other, "ply\n").unwrap();
+    let o = nuvo(&["eval", other.to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("mesh.ply") && stderr(&o).contains("unsupported"), "{}", stderr(&o));
+}
+
+#[test]
+fn bad_options_fail_without_panicking() {
+    let p = data("meshes/spot.obj");
+    let o = nuvo(&["eval", p.to_str().unwrap(), "--views", "0"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("views") && !stderr(&o).contains("panicked"), "{}", stderr(&o));
+    let o = nuvo(&["eval", p.to_str().unwrap(), "--resolution", "-3"]);
+    assert!(!o.status.success());
+}
+
+#[test]
+fn spot_gives_a_table_and_json_and_pictures() {
+    let p = data("meshes/spot.obj");
+    let o = nuvo(&["eval", p.to_str().unwrap(), "--views", "3", "--resolution", "200"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let table = String::from_utf8(o.stdout).unwrap();
+    for row in ["Boundary", "Stretch", "Conformal", "Editability", "charts", "UV utilisation"] {
+        assert!(table.contains(row), "{table}");
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let pics = dir.path().join("pics");
+    let o = nuvo(&[
+        "eval",
+        p.to_str().unwrap(),
+        "--views",
+        "3",
+        "--resolution",
+        "200",
+        "--json",
+        "--pictures",
+        pics.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("valid JSON");
+    let b = v["metrics"]["image"]["boundary"].as_f64().unwrap();
+    assert!(b > 0.5 && b < 1.0, "{b}");
+    assert_eq!(v["faces"], 5856);
+    assert_eq!(v["metrics"]["options"]["views"], 3);
+    for f in ["uv_layout.png", "checker.png", "checker_view_0.png"] {
+        assert!(pics.join(f).is_file(), "{f} not written");
+    }
+}
