@@ -14,7 +14,7 @@
 //! seam are split, others shared. Normals (optional) are area-weighted per *position*, so a seam
 //! does not crease the shading.
 //!
-//! All files are written atomically ([`crate::fsio::write_atomic`]).
+//! All files are written atomically ([`nuvo_geometry::fsio::write_atomic`]).
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
@@ -25,7 +25,7 @@ use json::validation::USize64;
 use nuvo_geometry::{Similarity, TriMesh, UvLayer};
 
 use crate::error::AtlasError;
-use crate::fsio::write_atomic;
+use crate::error::write_atomic;
 use crate::vecmath::vertex_normals;
 
 /// Name of the single material of exported meshes.

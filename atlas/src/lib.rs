@@ -13,7 +13,6 @@
 //! | [`metrics`] | Boundary, Stretch, Conformal, Editability over seeded views (definitions there) |
 //! | [`uvstats`] | charts, flips, utilisation and overlaps of a UV layout |
 //! | [`load`] | choosing the mesh reader by extension |
-//! | [`fsio`] | atomic file writes |
 //!
 //! The exact metric definitions and defaults are in the [`metrics`] and [`uvstats`] module docs and
 //! in `atlas/README.md`.
@@ -25,7 +24,6 @@ pub mod camera;
 pub mod error;
 pub mod export;
 mod font;
-pub mod fsio;
 pub mod load;
 pub mod metrics;
 pub mod pack;

@@ -12,8 +12,8 @@ use rayon::prelude::*;
 
 use crate::camera::{Camera, MAX_IMAGE_SIDE, orbit_views};
 use crate::error::AtlasError;
+use crate::error::write_atomic;
 use crate::font::{GLYPH, draw_text};
-use crate::fsio::write_atomic;
 use crate::pack::AtlasLayout;
 use crate::raster::raster_parallel;
 use crate::render::render;

@@ -22,6 +22,7 @@ pub mod density;
 pub(crate) mod eigen;
 pub mod error;
 pub mod frame;
+pub mod fsio;
 pub mod gltf_io;
 pub mod load;
 pub(crate) mod math;

@@ -9,7 +9,6 @@
 //! Geometry sources and losses come from registries ([`nuvo_geometry::SourceRegistry`],
 //! [`nuvo_losses::LossRegistry`]), so an application can add its own before building a [`Trainer`].
 
-pub mod atomic;
 pub mod batch;
 pub mod checkpoint;
 pub mod config;

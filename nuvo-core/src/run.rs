@@ -15,9 +15,9 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use crate::atomic::write_atomic;
 use crate::checkpoint::Checkpoint;
 use crate::trainer::{StepOutcome, TrainError, Trainer};
+use nuvo_geometry::fsio::write_bytes_atomic as write_atomic;
 
 /// Fixed file names inside an output folder.
 pub mod files {
