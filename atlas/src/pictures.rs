@@ -6,7 +6,9 @@
 
 use std::path::{Path, PathBuf};
 
-use image::{ImageEncoder, Rgb, RgbImage, codecs::png::PngEncoder};
+/// The RGB image type of every picture (re-exported so users need not depend on `image`).
+pub use image::RgbImage;
+use image::{ImageEncoder, Rgb, codecs::png::PngEncoder};
 use nuvo_geometry::{TriMesh, UvLayer};
 use rayon::prelude::*;
 

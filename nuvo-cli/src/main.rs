@@ -3,6 +3,7 @@
 mod bench;
 mod demo;
 mod eval;
+mod train;
 
 use std::process::ExitCode;
 
@@ -18,6 +19,10 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Train an atlas from an experiment config, then bake, export, draw and measure it.
+    Train(train::TrainArgs),
+    /// Bake, export, draw and measure the atlas of a run folder or checkpoint.
+    Bake(train::BakeArgs),
     /// Measure a mesh's UVs: the paper's Boundary/Stretch/Conformal/Editability and UV statistics.
     Eval(eval::EvalArgs),
     /// Fit a small MLP to a known function with the autodiff engine and report the error.
@@ -28,6 +33,8 @@ enum Command {
 
 fn main() -> ExitCode {
     let result = match Cli::parse().command {
+        Command::Train(args) => train::train(&args),
+        Command::Bake(args) => train::bake(&args),
         Command::Eval(args) => eval::run(&args),
         Command::Demo(args) => demo::run(&args),
         Command::Bench(args) => bench::run(&args),

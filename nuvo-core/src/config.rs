@@ -189,17 +189,45 @@ pub struct LossConfig {
     pub options: toml::Table,
 }
 
-/// `[output]`.
+/// `[output]`: where results go and how the atlas is baked, drawn and measured.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct OutputConfig {
     /// Output folder (relative to the working directory).
     pub dir: PathBuf,
+    /// Bake, export, draw and measure the atlas after training.
+    pub bake: bool,
+    /// A mesh to bake onto when the geometry source has none (point clouds, density fields), in the
+    /// input's own coordinates; relative to the config's folder.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bake_mesh: Option<PathBuf>,
+    /// Side of the packed atlas in texels (the charts' grid cells tile it).
+    pub atlas_resolution: u32,
+    /// Empty texels around each chart in the atlas, so bilinear filtering does not bleed.
+    pub gutter: u32,
+    /// Views of the metrics (the paper's protocol: random views on a sphere).
+    pub eval_views: usize,
+    /// Side of each metrics view in pixels.
+    pub eval_resolution: u32,
+    /// Checkerboard renders written to `renders/`.
+    pub renders: usize,
+    /// Side of each render in pixels.
+    pub render_resolution: u32,
 }
 
 impl Default for OutputConfig {
     fn default() -> Self {
-        OutputConfig { dir: PathBuf::from("runs/nuvo") }
+        OutputConfig {
+            dir: PathBuf::from("runs/nuvo"),
+            bake: true,
+            bake_mesh: None,
+            atlas_resolution: 2048,
+            gutter: 4,
+            eval_views: 16,
+            eval_resolution: 800,
+            renders: 4,
+            render_resolution: 512,
+        }
     }
 }
 
@@ -424,6 +452,29 @@ impl ModelConfig {
 }
 
 impl ExperimentConfig {
+    /// Makes the input paths written in the file absolute (`base` is the config's folder): every
+    /// `path` or `file` key inside `[geometry]` (at any depth) and `output.bake_mesh`. The resolved
+    /// config saved with a run then works from any working directory (for `nuvo bake`, `--resume`).
+    pub fn absolutize_paths(&mut self, base: &Path) {
+        fn visit(t: &mut toml::Table, base: &Path) {
+            for (k, v) in t.iter_mut() {
+                match v {
+                    toml::Value::String(p)
+                        if (k == "path" || k == "file") && Path::new(p.as_str()).is_relative() =>
+                    {
+                        *p = base.join(&*p).to_string_lossy().into_owned();
+                    }
+                    toml::Value::Table(inner) => visit(inner, base),
+                    _ => {}
+                }
+            }
+        }
+        visit(&mut self.geometry.options, base);
+        if let Some(m) = self.output.bake_mesh.as_mut().filter(|m| m.is_relative()) {
+            *m = base.join(&*m);
+        }
+    }
+
     /// Range checks that serde's types cannot express.
     pub fn validate(&self, src: &ConfigSource) -> Result<(), ConfigError> {
         let m = &self.model;
@@ -485,6 +536,23 @@ impl ExperimentConfig {
         }
         if !(0.0..=1.0).contains(&o.final_lr_factor) {
             return Err(src.invalid("optimizer.final_lr_factor", "must be in [0, 1]"));
+        }
+        let out = &self.output;
+        if !(16..=16384).contains(&out.atlas_resolution) {
+            return Err(src.invalid("output.atlas_resolution", "must be between 16 and 16384 texels"));
+        }
+        if out.gutter.saturating_mul(4) >= out.atlas_resolution {
+            return Err(
+                src.invalid("output.gutter", "leaves no room for the charts at this atlas resolution")
+            );
+        }
+        if out.eval_views == 0 || !(16..=8192).contains(&out.eval_resolution) {
+            return Err(
+                src.invalid("output.eval_views", "needs at least one view of 16 to 8192 pixels a side")
+            );
+        }
+        if !(16..=8192).contains(&out.render_resolution) {
+            return Err(src.invalid("output.render_resolution", "must be between 16 and 8192 pixels"));
         }
         for (name, l) in self.losses.iter().flatten() {
             if let Some(w) = l.weight
@@ -583,6 +651,10 @@ mod tests {
         let c = load(&p, &["geometry.path=other.obj".to_owned()]).unwrap();
         let got = PathBuf::from(c.config.geometry.options["path"].as_str().unwrap());
         assert_eq!(got, std::env::current_dir().unwrap().join("other.obj"));
+        // Paths written in the file resolve against the file's folder, and become absolute.
+        let c = load(&p, &[]).unwrap();
+        let got = PathBuf::from(c.config.geometry.options["path"].as_str().unwrap());
+        assert_eq!(got, dir.path().join("bunny.obj"));
     }
 
     #[test]

@@ -13,6 +13,7 @@ pub mod batch;
 pub mod checkpoint;
 pub mod config;
 pub mod model;
+pub mod outputs;
 pub mod run;
 pub mod seeds;
 pub mod trainer;

@@ -1,0 +1,180 @@
+//! `nuvo train CONFIG` and `nuvo bake RUN`: train an atlas, then bake, export, draw and measure it.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::Context;
+use indicatif::{ProgressBar, ProgressStyle};
+use nuvo_core::outputs::{OutputReport, write_outputs};
+use nuvo_core::run::{Observer, RunOptions, files, run};
+use nuvo_core::{Checkpoint, LoadedConfig, StepOutcome, Trainer, config};
+use nuvo_geometry::SourceRegistry;
+use nuvo_losses::LossRegistry;
+
+#[derive(clap::Args)]
+pub struct TrainArgs {
+    /// The experiment config (TOML), e.g. configs/bunny.toml.
+    config: PathBuf,
+    /// Output folder (overrides `output.dir`).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Override a config value, e.g. `--set training.steps=200` (repeatable; TOML values).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    set: Vec<String>,
+    /// Continue the run in the output folder from its last checkpoint.
+    #[arg(long)]
+    resume: bool,
+    /// Stop after training: no baking, exports, pictures or metrics.
+    #[arg(long)]
+    no_bake: bool,
+}
+
+#[derive(clap::Args)]
+pub struct BakeArgs {
+    /// A run folder (containing checkpoint.safetensors) or a checkpoint file.
+    run: PathBuf,
+    /// Output folder (default: the run folder).
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+pub fn train(args: &TrainArgs) -> anyhow::Result<()> {
+    let mut loaded = config::load(&args.config, &args.set)?;
+    if let Some(out) = &args.out {
+        loaded.config.output.dir = out.clone();
+    }
+    let mut trainer = build_trainer(&loaded)?;
+    let out_dir = loaded.config.output.dir.clone();
+    let mut progress = Progress::new(trainer.total_steps());
+    let opts = RunOptions { out_dir: out_dir.clone(), resume: args.resume };
+    let summary = run(&mut trainer, &opts, &mut progress)?;
+    progress.finish();
+    println!(
+        "trained {} steps in {:.1} s ({} skipped, {} rollbacks){}; run folder {}",
+        summary.steps,
+        summary.seconds,
+        summary.skipped,
+        summary.rollbacks,
+        if summary.stopped_by_budget { ", stopped by the time budget" } else { "" },
+        out_dir.display()
+    );
+    if args.no_bake || !loaded.config.output.bake {
+        return Ok(());
+    }
+    bake_into(&mut trainer, &out_dir, &loaded)
+}
+
+pub fn bake(args: &BakeArgs) -> anyhow::Result<()> {
+    let ckpt_path = if args.run.is_dir() { args.run.join(files::CHECKPOINT) } else { args.run.clone() };
+    let ckpt = Checkpoint::load(&ckpt_path)?;
+    let loaded = config::from_str(&ckpt_path.display().to_string(), &ckpt.config_toml)
+        .with_context(|| format!("the config stored in {}", ckpt_path.display()))?;
+    let mut trainer = build_trainer(&loaded)?;
+    trainer.restore(&ckpt)?;
+    let out =
+        args.out.clone().unwrap_or_else(|| ckpt_path.parent().map(Path::to_path_buf).unwrap_or_default());
+    bake_into(&mut trainer, &out, &loaded)
+}
+
+fn build_trainer(loaded: &LoadedConfig) -> anyhow::Result<Trainer> {
+    let started = Instant::now();
+    let trainer = Trainer::new(loaded, &SourceRegistry::with_builtins(), &LossRegistry::with_builtins())?;
+    let (c, t, s) = trainer.model().macs_per_point();
+    let m = &loaded.config.model;
+    println!("geometry: {} (ready in {:.1} s)", trainer.source().describe(), started.elapsed().as_secs_f64());
+    println!(
+        "model: {} chart(s), {} parameters; MACs/point chart {c}, texture {t}, surface {s}; normal grids {}²",
+        m.charts,
+        trainer.params().numel(),
+        trainer.model().grid_resolution()
+    );
+    let terms: Vec<String> = trainer.terms().iter().map(|t| format!("{}×{}", t.name, t.weight)).collect();
+    println!("losses: {}", terms.join(", "));
+    Ok(trainer)
+}
+
+fn bake_into(trainer: &mut Trainer, out: &Path, loaded: &LoadedConfig) -> anyhow::Result<()> {
+    let started = Instant::now();
+    let report = write_outputs(trainer, out, &loaded.config.output)?;
+    print_report(&report, started.elapsed().as_secs_f64());
+    Ok(())
+}
+
+fn print_report(report: &OutputReport, seconds: f64) {
+    if let Some(m) = &report.metrics {
+        let i = &m.metrics.image;
+        let u = &m.metrics.uv;
+        println!(
+            "atlas ({:.1} s): Boundary {:.4}  Stretch {:.4}  Conformal {:.4}  Editability {:.4}  ({} views)",
+            seconds, i.boundary, i.stretch, i.conformal, i.editability, i.views_used
+        );
+        println!(
+            "       UV charts {}, utilisation {:.3}, flipped {} faces, overlapping {} faces, faces per chart {:?}",
+            u.charts, u.utilisation, m.bake.flipped_faces, m.bake.overlapping_faces, m.bake.faces_per_chart
+        );
+    }
+    for f in &report.files {
+        println!("wrote {}", f.display());
+    }
+}
+
+/// A progress bar with the step, every loss term and the ETA; plain lines when stderr is not a
+/// terminal.
+struct Progress {
+    bar: ProgressBar,
+    total: u64,
+    every: u64,
+    started: Instant,
+}
+
+impl Progress {
+    fn new(total: u64) -> Self {
+        let bar = ProgressBar::new(total);
+        bar.set_style(
+            ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} ETA {eta_precise}  {msg}")
+                .expect("the template is valid")
+                .progress_chars("=> "),
+        );
+        Progress { bar, total, every: (total / 20).max(1), started: Instant::now() }
+    }
+
+    fn finish(&self) {
+        self.bar.finish_and_clear();
+    }
+}
+
+fn describe(o: &StepOutcome) -> String {
+    let terms: Vec<String> = o.terms.iter().map(|(n, v)| format!("{n} {v:.3e}")).collect();
+    format!("loss {:.4e} | {} | σ {:.3e}", o.total, terms.join(" "), o.sigma)
+}
+
+impl Observer for Progress {
+    fn started(&mut self, trainer: &Trainer, resumed_from: Option<u64>) {
+        if let Some(s) = resumed_from {
+            self.bar.println(format!("resuming from step {s}"));
+        }
+        self.bar.set_position(trainer.step_index());
+        self.started = Instant::now();
+    }
+
+    fn stepped(&mut self, o: &StepOutcome, _: &Trainer) {
+        self.bar.set_position(o.step + 1);
+        self.bar.set_message(describe(o));
+        if self.bar.is_hidden() && ((o.step + 1) % self.every == 0 || o.step + 1 == self.total) {
+            eprintln!(
+                "step {}/{} ({:.0} s): {}",
+                o.step + 1,
+                self.total,
+                self.started.elapsed().as_secs_f64(),
+                describe(o)
+            );
+        }
+    }
+
+    fn note(&mut self, message: &str) {
+        self.bar.println(message);
+        if self.bar.is_hidden() {
+            eprintln!("{message}");
+        }
+    }
+}

@@ -1,0 +1,250 @@
+//! From trained networks to files a user can use: the baked mesh (OBJ + MTL, GLB), pictures and the
+//! paper's metrics, under fixed names scripts can rely on:
+//!
+//! | file | what |
+//! |---|---|
+//! | `atlas.obj`, `atlas.mtl` | the mesh with per-corner UVs in the packed atlas, input coordinates |
+//! | `atlas.glb` | the same as binary glTF (checkerboard embedded as its texture) |
+//! | `uv_layout.png` | the baked UV triangles coloured by chart, overlaps in red |
+//! | `checker.png` | the checkerboard texture the OBJ's material and the renders use |
+//! | `renders/view_{k}.png` | the mesh wearing the checkerboard from several views |
+//! | `normal_grids.png` | the learned normal grids `N_i`, packed like the atlas |
+//! | `metrics.json` | Boundary, Stretch, Conformal, Editability, UV statistics and the bake report |
+//! | `points_uv.csv` | per-point charts and UVs, when there is no mesh to bake onto |
+//!
+//! Baking follows the paper's "(b)" rows: the networks are evaluated at the mesh vertices, every face
+//! takes one chart and its corners that chart's UVs (see `nuvo_atlas::bake`).
+
+use std::path::{Path, PathBuf};
+
+use nuvo_atlas::AtlasError;
+use nuvo_atlas::bake::{BakeReport, bake};
+use nuvo_atlas::camera::orbit_views;
+use nuvo_atlas::export::{GlbOptions, write_glb, write_obj};
+use nuvo_atlas::metrics::{EvalOptions, Metrics, evaluate};
+use nuvo_atlas::pack::AtlasLayout;
+use nuvo_atlas::pictures::{
+    ChartGrid, chart_grid_image, checkerboard, pack_images, png_bytes, render_textured, uv_layout, write_png,
+};
+use nuvo_geometry::{GeometryError, TriMesh};
+use nuvo_losses::Networks;
+use serde::Serialize;
+
+use crate::config::OutputConfig;
+use crate::trainer::Trainer;
+
+/// Output file names.
+pub mod names {
+    pub const OBJ: &str = "atlas.obj";
+    pub const GLB: &str = "atlas.glb";
+    pub const LAYOUT: &str = "uv_layout.png";
+    pub const CHECKER: &str = "checker.png";
+    pub const RENDERS: &str = "renders";
+    pub const NORMAL_GRIDS: &str = "normal_grids.png";
+    pub const METRICS: &str = "metrics.json";
+    pub const POINTS: &str = "points_uv.csv";
+}
+
+/// Why outputs could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum OutputError {
+    #[error(transparent)]
+    Atlas(#[from] AtlasError),
+    #[error(transparent)]
+    Geometry(#[from] GeometryError),
+    #[error("cannot write {path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// Counts from the bake (the full face lists stay in memory only).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct BakeSummary {
+    pub faces: usize,
+    pub flipped_faces: usize,
+    pub overlapping_faces: usize,
+    pub degenerate_uv_faces: usize,
+    pub split_vertices: usize,
+    pub corners_outside_chart: usize,
+    pub mixed_faces: usize,
+    /// Faces per chart.
+    pub faces_per_chart: Vec<usize>,
+}
+
+/// What `metrics.json` holds.
+#[derive(Clone, Debug, Serialize)]
+pub struct OutputMetrics {
+    /// The paper's metrics of the baked mesh.
+    pub metrics: Metrics,
+    /// The bake's findings.
+    pub bake: BakeSummary,
+    /// Steps trained.
+    pub steps: u64,
+}
+
+/// What was written.
+#[derive(Clone, Debug)]
+pub struct OutputReport {
+    pub files: Vec<PathBuf>,
+    /// `None` when there was no mesh to bake onto (per-point UVs were written instead).
+    pub metrics: Option<OutputMetrics>,
+}
+
+fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> OutputError + '_ {
+    move |source| OutputError::Io { path: path.to_owned(), source }
+}
+
+/// Bakes, exports, draws and measures the trainer's atlas into `dir`.
+pub fn write_outputs(
+    trainer: &mut Trainer,
+    dir: &Path,
+    opts: &OutputConfig,
+) -> Result<OutputReport, OutputError> {
+    std::fs::create_dir_all(dir).map_err(io_err(dir))?;
+    let mesh = match (&opts.bake_mesh, trainer.source().mesh()) {
+        (Some(path), _) => {
+            let mut m = nuvo_geometry::load_mesh(path)?;
+            m.uv = None;
+            m.transform(&trainer.source().to_canonical());
+            Some(m)
+        }
+        (None, Some(m)) => Some(TriMesh { uv: None, ..m.clone() }),
+        (None, None) => None,
+    };
+    match mesh {
+        Some(mesh) => bake_and_measure(trainer, &mesh, dir, opts),
+        None => write_point_uvs(trainer, dir, opts),
+    }
+}
+
+fn bake_and_measure(
+    trainer: &mut Trainer,
+    mesh: &TriMesh,
+    dir: &Path,
+    opts: &OutputConfig,
+) -> Result<OutputReport, OutputError> {
+    let n = trainer.model().charts();
+    let frame = trainer.source().to_canonical();
+    let (probs, uvs) = trainer.evaluate_atlas(&mesh.positions);
+    let layout = AtlasLayout::grid(n, opts.atlas_resolution, opts.gutter)?;
+    let baked = bake(mesh, &probs, &uvs, n, &layout)?;
+    let mut files = Vec::new();
+    let path = |name: &str| dir.join(name);
+
+    let checker = checkerboard(opts.atlas_resolution.min(2048), 8 * layout.columns)?;
+    write_png(&path(names::CHECKER), &checker)?;
+    files.push(path(names::CHECKER));
+    write_obj(&path(names::OBJ), &baked.mesh, &frame, Some(Path::new(names::CHECKER)))?;
+    files.push(path(names::OBJ));
+    files.push(path(names::OBJ).with_extension("mtl"));
+    let png = png_bytes(&checker)?;
+    write_glb(
+        &path(names::GLB),
+        &baked.mesh,
+        &frame,
+        &GlbOptions { normals: true, texture_png: Some(&png) },
+    )?;
+    files.push(path(names::GLB));
+    write_png(
+        &path(names::LAYOUT),
+        &uv_layout(&baked.mesh, Some(&baked.face_chart), opts.atlas_resolution.min(2048))?,
+    )?;
+    files.push(path(names::LAYOUT));
+    files.extend(write_renders(&baked.mesh, &checker, dir, opts)?);
+    files.push(write_normal_grids(trainer, &layout, dir)?);
+
+    let eval =
+        EvalOptions { views: opts.eval_views, resolution: opts.eval_resolution, ..EvalOptions::default() };
+    let metrics = evaluate(&baked.mesh, &eval)?;
+    let summary = OutputMetrics {
+        metrics,
+        bake: summarize(&baked.report, &baked.face_chart, n),
+        steps: trainer.step_index(),
+    };
+    let json = serde_json::to_string_pretty(&summary).unwrap_or_default();
+    nuvo_geometry::fsio::write_bytes_atomic(&path(names::METRICS), json.as_bytes())
+        .map_err(io_err(&path(names::METRICS)))?;
+    files.push(path(names::METRICS));
+    Ok(OutputReport { files, metrics: Some(summary) })
+}
+
+fn summarize(r: &BakeReport, face_chart: &[u32], n: usize) -> BakeSummary {
+    let mut faces_per_chart = vec![0; n];
+    for &c in face_chart {
+        faces_per_chart[c as usize] += 1;
+    }
+    BakeSummary {
+        faces: face_chart.len(),
+        flipped_faces: r.flipped_faces.len(),
+        overlapping_faces: r.overlapping_faces.len(),
+        degenerate_uv_faces: r.degenerate_uv_faces.len(),
+        split_vertices: r.split_vertices,
+        corners_outside_chart: r.corners_outside_chart,
+        mixed_faces: r.mixed_faces,
+        faces_per_chart,
+    }
+}
+
+fn write_renders(
+    mesh: &TriMesh,
+    checker: &nuvo_atlas::pictures::RgbImage,
+    dir: &Path,
+    opts: &OutputConfig,
+) -> Result<Vec<PathBuf>, OutputError> {
+    if opts.renders == 0 {
+        return Ok(Vec::new());
+    }
+    let renders = dir.join(names::RENDERS);
+    std::fs::create_dir_all(&renders).map_err(io_err(&renders))?;
+    let bounds = mesh.bounds().ok_or_else(|| AtlasError::invalid("mesh", "no vertices"))?;
+    let cams = orbit_views(&bounds, opts.renders, 1, opts.render_resolution, opts.render_resolution);
+    let mut files = Vec::new();
+    for (k, img) in render_textured(mesh, &cams, checker)?.iter().enumerate() {
+        let p = renders.join(format!("view_{k}.png"));
+        write_png(&p, img)?;
+        files.push(p);
+    }
+    Ok(files)
+}
+
+fn write_normal_grids(trainer: &Trainer, layout: &AtlasLayout, dir: &Path) -> Result<PathBuf, OutputError> {
+    let res = trainer.model().grid_resolution();
+    let params = trainer.params();
+    let images = (0..trainer.model().charts())
+        .map(|i| {
+            let values = params.value(trainer.model().grid_param(i)).data();
+            chart_grid_image(&ChartGrid { width: res, height: res, values })
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let p = dir.join(names::NORMAL_GRIDS);
+    write_png(&p, &pack_images(layout, &images)?)?;
+    Ok(p)
+}
+
+/// Without a mesh: charts and atlas UVs of points drawn from the source, as CSV in input coordinates.
+fn write_point_uvs(
+    trainer: &mut Trainer,
+    dir: &Path,
+    opts: &OutputConfig,
+) -> Result<OutputReport, OutputError> {
+    const POINTS: usize = 200_000;
+    let n = trainer.model().charts();
+    let frame = trainer.source().to_canonical();
+    let pts = trainer.source().sample(POINTS, trainer.config().seed).positions;
+    let (probs, uvs) = trainer.evaluate_atlas(&pts);
+    let layout = AtlasLayout::grid(n, opts.atlas_resolution, opts.gutter)?;
+    let mut csv = String::from("x,y,z,chart,u,v\n");
+    for (k, p) in pts.iter().enumerate() {
+        let row = &probs[k * n..(k + 1) * n];
+        let chart = (0..n).fold(0, |best, i| if row[i] > row[best] { i } else { best });
+        let uv = layout.map(chart, [uvs[(k * n + chart) * 2], uvs[(k * n + chart) * 2 + 1]]);
+        let q = frame.invert(*p);
+        csv.push_str(&format!("{},{},{},{chart},{},{}\n", q[0], q[1], q[2], uv[0], uv[1]));
+    }
+    let path = dir.join(names::POINTS);
+    nuvo_geometry::fsio::write_bytes_atomic(&path, csv.as_bytes()).map_err(io_err(&path))?;
+    Ok(OutputReport { files: vec![path], metrics: None })
+}
