@@ -16,7 +16,6 @@
 //! | `point_cloud` ([`point_cloud`]) | `.ply`, `.xyz` | random stored points; normals estimated if absent |
 //! | `density` ([`density`]) | `.npy` 3-D grid | volume-rendering weights along camera rays |
 
-pub mod bvh;
 pub mod camera;
 pub mod density;
 pub(crate) mod eigen;
@@ -33,6 +32,7 @@ pub mod obj;
 pub mod options;
 pub mod ply;
 pub mod point_cloud;
+pub mod raycast;
 pub mod registry;
 pub mod sampling;
 pub(crate) mod seeding;
