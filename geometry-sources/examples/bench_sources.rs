@@ -9,7 +9,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use nuvo_geometry::camera::{CameraOptions, CameraRig};
+use nuvo_geometry::camera::{CameraOptions, CameraRig, area_radius};
 use nuvo_geometry::raycast::RayCaster;
 use nuvo_geometry::{BuildContext, GeometrySource, Similarity, SourceRegistry};
 use rand::SeedableRng;
@@ -65,16 +65,11 @@ fn main() {
     let sim = Similarity::normalizing(&mesh.bounds().expect("non-empty"));
     mesh.transform(&sim);
     let (t, caster) = best_of(repeat, || RayCaster::build(&mesh));
+    println!("area radius (99.5% of area): {:.3}", area_radius(&mesh));
     println!("ray caster build ({} non-degenerate triangles): {t:.3} s", caster.triangle_count());
     let ctx = BuildContext { base_dir: data.clone() };
-    let rig = CameraRig::from_options(
-        &CameraOptions::default(),
-        &ctx,
-        &mesh.bounds().expect("bounds"),
-        &sim,
-        "bench",
-    )
-    .expect("rig");
+    let rig = CameraRig::from_options(&CameraOptions::default(), &ctx, area_radius(&mesh), &sim, "bench")
+        .expect("rig");
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
     let rays: Vec<_> = (0..1_000_000).map(|_| rig.random_ray(&mut rng)).collect();
     let (t, hits) = best_of(repeat, || {

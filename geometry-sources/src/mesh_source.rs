@@ -14,7 +14,7 @@ use std::path::PathBuf;
 
 use serde::Deserialize;
 
-use crate::camera::{CameraOptions, CameraRig};
+use crate::camera::{CameraOptions, CameraRig, area_radius};
 use crate::error::GeometryError;
 use crate::frame::{Aabb, Similarity};
 use crate::mesh::TriMesh;
@@ -104,7 +104,7 @@ impl MeshSource {
             SamplingMode::Uniform => Sampler::Uniform(areas),
             SamplingMode::Visible => {
                 let cam_opts = opts.cameras.clone().unwrap_or_default();
-                let rig = CameraRig::from_options(&cam_opts, ctx, &bounds, &to_canonical, "mesh")?;
+                let rig = CameraRig::from_options(&cam_opts, ctx, area_radius(&mesh), &to_canonical, "mesh")?;
                 let vs = VisibleSampler::new(&mesh, rig, &normals).map_err(|m| options_error("mesh", m))?;
                 Sampler::Visible(Box::new(vs))
             }
