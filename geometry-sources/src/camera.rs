@@ -30,7 +30,9 @@ use crate::registry::BuildContext;
 /// A ray; `dir` has unit length.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Ray {
+    /// Where the ray starts (the camera position).
     pub origin: V3,
+    /// Unit direction.
     pub dir: V3,
 }
 
@@ -38,6 +40,7 @@ pub struct Ray {
 /// `tan_half_fov` is positive and finite.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
+    /// Camera centre in the canonical frame.
     pub position: V3,
     forward: V3,
     right: V3,
@@ -116,7 +119,14 @@ impl Default for CameraOptions {
 pub enum CameraRig {
     /// A fresh camera for every ray, uniformly placed on a sphere of `radius` and looking at the
     /// jittered centre.
-    Sphere { radius: f32, jitter: f32, fov_degrees: f32 },
+    Sphere {
+        /// Distance of the cameras from the origin.
+        radius: f32,
+        /// Half-size of the cube the look-at point is drawn from.
+        jitter: f32,
+        /// Full field of view.
+        fov_degrees: f32,
+    },
     /// Rays from a uniformly chosen camera of a fixed list.
     Fixed(Vec<Camera>),
 }

@@ -16,6 +16,8 @@
 //! | `point_cloud` ([`point_cloud`]) | `.ply`, `.xyz` | random stored points; normals estimated if absent |
 //! | `density` ([`density`]) | `.npy` 3-D grid | volume-rendering weights along camera rays |
 
+#![warn(missing_docs)]
+
 pub mod camera;
 pub mod density;
 pub(crate) mod eigen;
