@@ -60,7 +60,10 @@ enum Sampler {
     Visible(Box<VisibleSampler>),
 }
 
-/// A mesh in the canonical frame with its sampler.
+/// A mesh in the canonical frame with its sampler. The canonical frame normalises the bounding box of
+/// all vertices ([`TriMesh::bounds`], unreferenced ones included, so the handed-out mesh stays inside
+/// `[-1, 1]^3`); vertex order, faces and UVs are kept exactly as loaded, so a UV'd mesh written back
+/// with the inverse map matches the input.
 pub struct MeshSource {
     path: PathBuf,
     mesh: TriMesh,
