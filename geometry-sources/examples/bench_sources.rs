@@ -1,28 +1,30 @@
-//! Times the expensive paths of every source on the shared test data.
+//! Times the expensive paths of every source on the shared test data (numbers in BENCHMARKS.md).
 //!
 //! ```sh
-//! cargo run --release -p nuvo-geometry --example bench_sources -- /work/shared/data
+//! cargo run --release -p nuvo-geometry --example bench_sources -- /work/shared/data [--repeat N]
 //! ```
-//! The argument defaults to `$NUVO_DATA` or `<workspace>/../shared/data`. Each figure is the best
-//! of `--repeat N` runs (default 3), since the machine may be shared.
+//! The data folder defaults to `$NUVO_DATA` or `<workspace>/../shared/data`. Each figure is the best
+//! of `--repeat N` runs (default 3) of wall-clock time, since the machine may be shared.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use nuvo_geometry::bvh::Bvh;
-use nuvo_geometry::camera::{CameraOptions, CameraRig};
-use nuvo_geometry::{BuildContext, GeometrySource, SourceRegistry};
+use nuvo_geometry::camera::{CameraOptions, CameraRig, area_radius};
+use nuvo_geometry::raycast::RayCaster;
+use nuvo_geometry::{BuildContext, GeometrySource, Similarity, SourceRegistry};
+use rand::SeedableRng;
+use rayon::prelude::*;
 
 fn best_of<T>(repeat: usize, mut f: impl FnMut() -> T) -> (f64, T) {
     let mut best = f64::INFINITY;
     let mut out = None;
-    for _ in 0..repeat {
+    for _ in 0..repeat.max(1) {
         let t = Instant::now();
         let v = f();
         best = best.min(t.elapsed().as_secs_f64());
         out = Some(v);
     }
-    (best, out.expect("repeat >= 1"))
+    (best, out.expect("at least one run"))
 }
 
 fn build(name: &str, toml_text: &str, dir: &Path) -> Box<dyn GeometrySource> {
@@ -30,6 +32,17 @@ fn build(name: &str, toml_text: &str, dir: &Path) -> Box<dyn GeometrySource> {
     SourceRegistry::with_builtins()
         .build(name, &table, &BuildContext { base_dir: dir.to_path_buf() })
         .unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Times building a source and drawing `n` samples, then `n` and 5000 samples from the built source.
+fn bench_source(repeat: usize, label: &str, name: &str, toml_text: &str, dir: &Path, n: usize) {
+    let (t, s) = best_of(repeat, || build(name, toml_text, dir).sample(n, 1));
+    println!("{label}: load + prepare + {} samples: {t:.3} s", s.len());
+    let src = build(name, toml_text, dir);
+    let (t, s) = best_of(repeat, || src.sample(n, 2));
+    println!("{label}: {} samples (prepared): {t:.3} s", s.len());
+    let (t, s) = best_of(repeat, || src.sample(5000, 3));
+    println!("{label}: {} samples (one training batch): {:.1} ms", s.len(), 1e3 * t);
 }
 
 fn main() {
@@ -44,58 +57,55 @@ fn main() {
         }
     }
     let n = 100_000;
-    println!("threads: {}", rayon::current_num_threads());
+    println!("rayon threads: {}", rayon::current_num_threads());
 
     let vase = data.join("meshes/unruly_vase.obj");
-    let (t, mesh) = best_of(repeat, || nuvo_geometry::load_mesh(&vase).expect("vase loads"));
+    let (t, mut mesh) = best_of(repeat, || nuvo_geometry::load_mesh(&vase).expect("vase loads"));
     println!("load unruly_vase.obj ({} faces): {t:.3} s", mesh.triangles.len());
-    let (t, bvh) = best_of(repeat, || Bvh::build(&mesh));
-    println!("BVH build ({} triangles, {} nodes): {t:.3} s", bvh.triangle_count(), bvh.node_count());
-    // Ray throughput alone: 1M random camera rays (about half of them hit), in parallel.
-    let mut canon = mesh.clone();
-    let sim = nuvo_geometry::Similarity::normalizing(&canon.bounds().expect("non-empty"));
-    canon.transform(&sim);
-    let bvh = Bvh::build(&canon);
-    let rig = CameraRig::from_options(
-        &CameraOptions::default(),
-        &BuildContext { base_dir: data.clone() },
-        &canon.bounds().expect("non-empty"),
-        &sim,
-        "bench",
-    )
-    .expect("rig");
-    let rays: Vec<_> = {
-        use rand::SeedableRng;
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
-        (0..1_000_000).map(|_| rig.random_ray(&mut rng)).collect()
-    };
+    let sim = Similarity::normalizing(&mesh.bounds().expect("non-empty"));
+    mesh.transform(&sim);
+    let (t, caster) = best_of(repeat, || RayCaster::build(&mesh));
+    println!("area radius (99.5% of area): {:.3}", area_radius(&mesh));
+    println!("ray caster build ({} non-degenerate triangles): {t:.3} s", caster.triangle_count());
+    let ctx = BuildContext { base_dir: data.clone() };
+    let rig = CameraRig::from_options(&CameraOptions::default(), &ctx, area_radius(&mesh), &sim, "bench")
+        .expect("rig");
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+    let rays: Vec<_> = (0..1_000_000).map(|_| rig.random_ray(&mut rng)).collect();
     let (t, hits) = best_of(repeat, || {
-        use rayon::prelude::*;
-        rays.par_iter().filter(|r| bvh.intersect(r.origin, r.dir, 0.0, f32::INFINITY).is_some()).count()
+        rays.par_iter().filter(|r| caster.intersect(r.origin, r.dir, f32::MAX).is_some()).count()
     });
-    println!("1M rays ({hits} hits): {t:.3} s = {:.2} Mrays/s", 1.0 / t);
+    println!("1M random camera rays ({hits} hit): {t:.3} s = {:.2} Mrays/s", 1.0 / t);
+
+    let meshes = data.join("meshes");
+    bench_source(
+        repeat,
+        "mesh visible unruly_vase.obj",
+        "mesh",
+        "path = 'unruly_vase.obj'\nsampling = 'visible'",
+        &meshes,
+        n,
+    );
+    bench_source(repeat, "mesh uniform unruly_vase.obj", "mesh", "path = 'unruly_vase.obj'", &meshes, n);
+    bench_source(
+        repeat,
+        "density unruly_vase.npy",
+        "density",
+        "path = 'unruly_vase.npy'",
+        &data.join("density"),
+        n,
+    );
+    let clouds = data.join("pointclouds");
+    bench_source(
+        repeat,
+        "point_cloud bunny (file normals)",
+        "point_cloud",
+        "path = 'stanford-bunny_200k.ply'",
+        &clouds,
+        n,
+    );
     let (t, _) = best_of(repeat, || {
-        use rand::SeedableRng;
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
-        (0..1_000_000).map(|_| rig.random_ray(&mut rng)).fold(0.0f32, |a, r| a + r.dir[0])
+        build("point_cloud", "path = 'stanford-bunny_200k.ply'\nnormals = 'estimate'", &clouds)
     });
-    println!("1M ray generations (1 thread): {t:.3} s");
-
-    let dir = data.join("meshes");
-    let (t, s) = best_of(repeat, || {
-        let src = build("mesh", "path = 'unruly_vase.obj'\nsampling = 'visible'", &dir);
-        src.sample(n, 1)
-    });
-    println!("mesh visible: load + BVH + {} samples: {t:.3} s", s.len());
-    let src = build("mesh", "path = 'unruly_vase.obj'\nsampling = 'visible'", &dir);
-    let (t, s) = best_of(repeat, || src.sample(n, 2));
-    println!("mesh visible: {} samples (built): {t:.3} s", s.len());
-    let (t, s) = best_of(repeat, || src.sample(5000, 3));
-    println!("mesh visible: {} samples (one training batch): {:.2} ms", s.len(), 1e3 * t);
-    let src = build("mesh", "path = 'unruly_vase.obj'", &dir);
-    let (t, s) = best_of(repeat, || src.sample(n, 2));
-    println!("mesh uniform: {} samples (built): {t:.3} s", s.len());
+    println!("point_cloud bunny: load + estimate 200k normals: {t:.3} s");
 }
-
-#[allow(dead_code)]
-fn unused() {}

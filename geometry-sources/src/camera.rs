@@ -30,7 +30,9 @@ use crate::registry::BuildContext;
 /// A ray; `dir` has unit length.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Ray {
+    /// Where the ray starts (the camera position).
     pub origin: V3,
+    /// Unit direction.
     pub dir: V3,
 }
 
@@ -38,6 +40,7 @@ pub struct Ray {
 /// `tan_half_fov` is positive and finite.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
+    /// Camera centre in the canonical frame.
     pub position: V3,
     forward: V3,
     right: V3,
@@ -96,8 +99,9 @@ pub struct CameraOptions {
     /// centre, so view directions do not all pass through one point. Default 0.05.
     #[serde(default = "default_jitter")]
     pub jitter: f32,
-    /// Full field of view in degrees. Default for random cameras: just wide enough to see the whole
-    /// bounding sphere; for a camera file: the file's value, else 50.
+    /// Full field of view in degrees. Default for random cameras: just wide enough to see the sphere
+    /// they frame (for meshes the sphere holding 99.5% of the surface area, see [`area_radius`]; for
+    /// density grids the grid's bounding sphere); for a camera file: the file's value, else 50.
     pub fov_degrees: Option<f32>,
     /// A camera-pose file (JSON, see the module docs); relative paths resolve against the config's
     /// folder. When set, rays come from these cameras instead of random ones.
@@ -115,18 +119,27 @@ impl Default for CameraOptions {
 pub enum CameraRig {
     /// A fresh camera for every ray, uniformly placed on a sphere of `radius` and looking at the
     /// jittered centre.
-    Sphere { radius: f32, jitter: f32, fov_degrees: f32 },
+    Sphere {
+        /// Distance of the cameras from the origin.
+        radius: f32,
+        /// Half-size of the cube the look-at point is drawn from.
+        jitter: f32,
+        /// Full field of view.
+        fov_degrees: f32,
+    },
     /// Rays from a uniformly chosen camera of a fixed list.
     Fixed(Vec<Camera>),
 }
 
 impl CameraRig {
-    /// Builds the rig described by `opts` for an object with canonical bounds `bounds`;
-    /// `to_canonical` converts a camera file's poses. `source` names the source in errors.
+    /// Builds the rig described by `opts` for an object that random cameras should keep in view: the
+    /// sphere of radius `framed_radius` around the canonical origin (see [`bounding_radius`] and
+    /// [`area_radius`]). `to_canonical` converts a camera file's poses; `source` names the source in
+    /// errors.
     pub fn from_options(
         opts: &CameraOptions,
         ctx: &BuildContext,
-        bounds: &Aabb,
+        framed_radius: f32,
         to_canonical: &Similarity,
         source: &str,
     ) -> Result<CameraRig, GeometryError> {
@@ -143,10 +156,10 @@ impl CameraRig {
         if !(opts.jitter >= 0.0 && opts.jitter.is_finite()) {
             return Err(bad(format!("jitter = {} must be a finite number >= 0", opts.jitter)));
         }
-        let reach = bounding_radius(bounds) + opts.jitter * 3f32.sqrt();
+        let reach = framed_radius + opts.jitter * 3f32.sqrt();
         if !(opts.radius > reach && opts.radius.is_finite()) {
             return Err(bad(format!(
-                "radius = {} must exceed the object's bounding-sphere radius plus the jitter ({reach:.3})",
+                "radius = {} must exceed the radius of the object's framing sphere plus the jitter ({reach:.3})",
                 opts.radius
             )));
         }
@@ -198,8 +211,30 @@ const FALLBACK: Camera = Camera {
 };
 
 /// Radius of the sphere around the origin that contains `bounds`.
-pub(crate) fn bounding_radius(bounds: &Aabb) -> f32 {
+pub fn bounding_radius(bounds: &Aabb) -> f32 {
     norm(std::array::from_fn(|k| bounds.min[k].abs().max(bounds.max[k].abs())))
+}
+
+/// Radius of the sphere around the origin holding 99.5% of the surface area of `mesh` (by triangle,
+/// counting a triangle at its farthest corner). Random cameras frame this sphere: NeRF meshes have
+/// floaters and fog fragments out to the corners of their box, and framing the whole box would waste
+/// most rays on empty background (on `unruly_vase.obj`, 93% of rays missed). Floaters outside it are
+/// still seen, from cameras on their side.
+pub fn area_radius(mesh: &crate::mesh::TriMesh) -> f32 {
+    let mut r: Vec<(f32, f32)> = (0..mesh.triangles.len())
+        .map(|f| (mesh.corners(f).iter().map(|c| norm(*c)).fold(0.0, f32::max), mesh.face_area(f)))
+        .filter(|&(_, a)| a > 0.0 && a.is_finite())
+        .collect();
+    let total: f64 = r.iter().map(|&(_, a)| f64::from(a)).sum();
+    r.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut acc = 0.0f64;
+    for &(d, a) in &r {
+        acc += f64::from(a);
+        if acc >= 0.995 * total {
+            return d;
+        }
+    }
+    r.last().map_or(1.0, |&(d, _)| d)
 }
 
 /// A uniformly distributed unit vector.
@@ -316,8 +351,9 @@ mod tests {
     fn sphere_rig_rays_point_at_the_object() {
         let bounds = Aabb { min: [-1.0; 3], max: [1.0; 3] };
         let ctx = BuildContext { base_dir: ".".into() };
+        let framed = bounding_radius(&bounds);
         let rig =
-            CameraRig::from_options(&CameraOptions::default(), &ctx, &bounds, &Similarity::IDENTITY, "t")
+            CameraRig::from_options(&CameraOptions::default(), &ctx, framed, &Similarity::IDENTITY, "t")
                 .unwrap();
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
         for _ in 0..100 {
@@ -327,7 +363,7 @@ mod tests {
             assert!(dot(r.dir, r.origin) < 0.0);
         }
         let too_close = CameraOptions { radius: 1.5, ..Default::default() };
-        let e = CameraRig::from_options(&too_close, &ctx, &bounds, &Similarity::IDENTITY, "t").unwrap_err();
+        let e = CameraRig::from_options(&too_close, &ctx, framed, &Similarity::IDENTITY, "t").unwrap_err();
         assert!(e.to_string().contains("radius"), "{e}");
     }
 

@@ -30,7 +30,7 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::Deserialize;
 
-use crate::camera::{CameraOptions, CameraRig, Ray};
+use crate::camera::{CameraOptions, CameraRig, Ray, bounding_radius};
 use crate::error::GeometryError;
 use crate::frame::{Aabb, Similarity};
 use crate::math::{V3, madd, neg, normalize, scale};
@@ -188,10 +188,11 @@ impl DensitySource {
         let grid = DensityGrid::new(dims, data, to_canonical.apply(lo), to_canonical.apply(hi));
         let (cmin, cmax) = grid.bounds();
         let bounds = Aabb { min: cmin, max: cmax };
+        // The whole grid box is framed: empty space is skipped cheaply, so misses cost little.
         let rig = CameraRig::from_options(
             &opts.cameras.clone().unwrap_or_default(),
             ctx,
-            &bounds,
+            bounding_radius(&bounds),
             &to_canonical,
             "density",
         )?;

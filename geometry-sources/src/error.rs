@@ -9,22 +9,44 @@ pub enum GeometryError {
     /// The file could not be read at all (missing, a directory, permissions).
     #[error("cannot read {path}: {source}")]
     Io {
+        /// The file.
         path: PathBuf,
+        /// What the operating system said.
         #[source]
         source: std::io::Error,
     },
     /// The file was read but its content is not valid for its format.
     #[error("{path}: {message}")]
-    Malformed { path: PathBuf, message: String },
+    Malformed {
+        /// The file.
+        path: PathBuf,
+        /// The problem, as a sentence.
+        message: String,
+    },
     /// The content parsed but is unusable (no faces, NaN coordinates, ...).
     #[error("{path}: {message}")]
-    Invalid { path: PathBuf, message: String },
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// The problem, as a sentence.
+        message: String,
+    },
     /// A source's options table is wrong (unknown key, wrong type, bad value).
     #[error("geometry source `{source_name}`: {message}")]
-    Options { source_name: String, message: String },
+    Options {
+        /// The registry name of the source whose options are wrong.
+        source_name: String,
+        /// The problem (serde names the key and the valid ones for unknown keys).
+        message: String,
+    },
     /// No source is registered under this name.
     #[error("unknown geometry source `{name}`; known sources: {known}")]
-    UnknownSource { name: String, known: String },
+    UnknownSource {
+        /// The name asked for.
+        name: String,
+        /// The registered names, comma-separated.
+        known: String,
+    },
 }
 
 impl GeometryError {

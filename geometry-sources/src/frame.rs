@@ -5,7 +5,9 @@ use serde::{Deserialize, Serialize};
 /// An axis-aligned bounding box. Invariant once built from points: `min <= max` componentwise.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Aabb {
+    /// Smallest coordinate on each axis.
     pub min: [f32; 3],
+    /// Largest coordinate on each axis.
     pub max: [f32; 3],
 }
 
@@ -37,7 +39,9 @@ impl Aabb {
 /// Invariant: `scale > 0` and finite.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Similarity {
+    /// The input point that maps to the origin.
     pub center: [f32; 3],
+    /// The uniform scale applied after centring.
     pub scale: f32,
 }
 

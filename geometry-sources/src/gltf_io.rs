@@ -34,12 +34,16 @@ struct Part {
 pub fn load_gltf(path: &Path) -> Result<TriMesh, GeometryError> {
     let bad = |m: String| GeometryError::malformed(path, m);
     let bytes = std::fs::read(path).map_err(|e| GeometryError::Io { path: path.to_path_buf(), source: e })?;
-    let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| bad(format!("not a valid glTF/GLB file: {e}")))?;
+    let not_gltf = |e: gltf::Error| bad(format!("not a valid glTF/GLB file: {e}"));
+    // Parse, check what the crate's validator itself indexes unchecked, then validate.
+    let unchecked = gltf::Gltf::from_slice_without_validation(&bytes).map_err(not_gltf)?;
+    check_position_accessors(unchecked.document.as_json()).map_err(bad)?;
+    let document = gltf::Document::from_json(unchecked.document.into_json()).map_err(not_gltf)?;
     let base = path.parent().unwrap_or(Path::new("."));
-    let buffers = gltf::import_buffers(&gltf.document, Some(base), gltf.blob.clone())
+    let buffers = gltf::import_buffers(&document, Some(base), unchecked.blob)
         .map_err(|e| bad(format!("cannot load the glTF buffers: {e}")))?;
     let mut parts = Vec::new();
-    for (mesh, matrix) in mesh_instances(&gltf.document).map_err(bad)? {
+    for (mesh, matrix) in mesh_instances(&document).map_err(bad)? {
         for (p, prim) in mesh.primitives().enumerate() {
             let what = format!("mesh {} primitive {p}", mesh.index());
             if let Some(part) =
@@ -55,6 +59,26 @@ pub fn load_gltf(path: &Path) -> Result<TriMesh, GeometryError> {
     }
     mesh.validate().map_err(|m| GeometryError::invalid(path, m))?;
     Ok(mesh)
+}
+
+/// gltf-json's validator looks up each primitive's POSITION accessor without a bounds check (and
+/// panics on a bad index), so that one index is checked before validation.
+fn check_position_accessors(root: &gltf::json::Root) -> Result<(), String> {
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, prim) in mesh.primitives.iter().enumerate() {
+            let key = gltf::json::validation::Checked::Valid(gltf::Semantic::Positions);
+            if let Some(idx) = prim.attributes.get(&key)
+                && idx.value() >= root.accessors.len()
+            {
+                return Err(format!(
+                    "mesh {m} primitive {p}: POSITION refers to accessor {} but there are only {}",
+                    idx.value(),
+                    root.accessors.len()
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Every (mesh, world matrix) pair to read, following the scene graph.

@@ -16,7 +16,8 @@
 //! | `point_cloud` ([`point_cloud`]) | `.ply`, `.xyz` | random stored points; normals estimated if absent |
 //! | `density` ([`density`]) | `.npy` 3-D grid | volume-rendering weights along camera rays |
 
-pub mod bvh;
+#![warn(missing_docs)]
+
 pub mod camera;
 pub mod density;
 pub(crate) mod eigen;
@@ -34,6 +35,7 @@ pub mod obj;
 pub mod options;
 pub mod ply;
 pub mod point_cloud;
+pub mod raycast;
 pub mod registry;
 pub mod sampling;
 pub(crate) mod seeding;

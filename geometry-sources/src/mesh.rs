@@ -30,7 +30,9 @@ pub struct TriMesh {
 /// must flip back.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct UvLayer {
+    /// Texture coordinates `(u, v)`.
     pub coords: Vec<[f32; 2]>,
+    /// Per face, the indices into `coords` of its three corners.
     pub triangles: Vec<[u32; 3]>,
 }
 

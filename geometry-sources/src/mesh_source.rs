@@ -14,7 +14,7 @@ use std::path::PathBuf;
 
 use serde::Deserialize;
 
-use crate::camera::{CameraOptions, CameraRig};
+use crate::camera::{CameraOptions, CameraRig, area_radius};
 use crate::error::GeometryError;
 use crate::frame::{Aabb, Similarity};
 use crate::mesh::TriMesh;
@@ -60,7 +60,10 @@ enum Sampler {
     Visible(Box<VisibleSampler>),
 }
 
-/// A mesh in the canonical frame with its sampler.
+/// A mesh in the canonical frame with its sampler. The canonical frame normalises the bounding box of
+/// all vertices ([`TriMesh::bounds`], unreferenced ones included, so the handed-out mesh stays inside
+/// `[-1, 1]^3`); vertex order, faces and UVs are kept exactly as loaded, so a UV'd mesh written back
+/// with the inverse map matches the input.
 pub struct MeshSource {
     path: PathBuf,
     mesh: TriMesh,
@@ -104,7 +107,7 @@ impl MeshSource {
             SamplingMode::Uniform => Sampler::Uniform(areas),
             SamplingMode::Visible => {
                 let cam_opts = opts.cameras.clone().unwrap_or_default();
-                let rig = CameraRig::from_options(&cam_opts, ctx, &bounds, &to_canonical, "mesh")?;
+                let rig = CameraRig::from_options(&cam_opts, ctx, area_radius(&mesh), &to_canonical, "mesh")?;
                 let vs = VisibleSampler::new(&mesh, rig, &normals).map_err(|m| options_error("mesh", m))?;
                 Sampler::Visible(Box::new(vs))
             }

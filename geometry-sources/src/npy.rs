@@ -13,8 +13,11 @@ use crate::error::GeometryError;
 /// Element types this reader accepts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Dtype {
+    /// `uint8` (`|u1`).
     U8,
+    /// `float16` (`<f2` or `>f2`).
     F16,
+    /// `float32` (`<f4` or `>f4`).
     F32,
 }
 
@@ -32,8 +35,11 @@ impl Dtype {
 /// order (last index fastest).
 #[derive(Clone, Debug, PartialEq)]
 pub struct NpyArray {
+    /// The array's shape as declared (and checked against the data size).
     pub shape: Vec<usize>,
+    /// The element type stored in the file.
     pub dtype: Dtype,
+    /// The values converted to `f32`, in C order.
     pub data: Vec<f32>,
 }
 

@@ -15,7 +15,9 @@ use crate::math::V3;
 /// Points read from a file; `normals`, when present, has one (not yet normalised) entry per point.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PointSet {
+    /// Point coordinates as stored.
     pub positions: Vec<V3>,
+    /// Per-point normals when the file has them (any length, possibly zero: validated by the source).
     pub normals: Option<Vec<V3>>,
 }
 

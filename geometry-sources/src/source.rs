@@ -7,7 +7,9 @@ use crate::mesh::TriMesh;
 /// normal has unit length.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SurfaceSamples {
+    /// Sample points in the canonical frame.
     pub positions: Vec<[f32; 3]>,
+    /// Unit normals, one per point, pointing out of the surface (towards the viewer for visible samples).
     pub normals: Vec<[f32; 3]>,
 }
 

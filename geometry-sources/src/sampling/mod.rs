@@ -7,7 +7,7 @@ pub mod visible;
 
 use serde::Deserialize;
 
-use crate::math::{V3, cross, madd, normalize, scale, sub};
+use crate::math::{V3, dot, madd, normalize, scale, sub};
 use crate::mesh::TriMesh;
 
 /// Which normal a mesh sample carries.
@@ -61,8 +61,18 @@ pub(crate) fn point_on(mesh: &TriMesh, f: usize, b1: f32, b2: f32) -> V3 {
     madd(madd(a, b1, sub(b, a)), b2, sub(c, a))
 }
 
-/// Twice the area of a triangle given by its corners (for tests and checks).
-#[allow(dead_code)]
-pub(crate) fn double_area(a: V3, b: V3, c: V3) -> f32 {
-    crate::math::norm(cross(sub(b, a), sub(c, a)))
+/// Barycentric coordinates `(b1, b2)` of the point of face `f`'s plane nearest to `p`, clamped to
+/// the triangle (the weights of corners 1 and 2). Face `f` must have positive area.
+pub(crate) fn barycentric(mesh: &TriMesh, f: usize, p: V3) -> (f32, f32) {
+    let [a, b, c] = mesh.corners(f);
+    let (e1, e2, d) = (sub(b, a), sub(c, a), sub(p, a));
+    let (d11, d12, d22) = (dot(e1, e1), dot(e1, e2), dot(e2, e2));
+    let (d1, d2) = (dot(d, e1), dot(d, e2));
+    let det = d11 * d22 - d12 * d12;
+    if det.is_nan() || det <= 0.0 {
+        return (1.0 / 3.0, 1.0 / 3.0);
+    }
+    let b1 = ((d22 * d1 - d12 * d2) / det).clamp(0.0, 1.0);
+    let b2 = ((d11 * d2 - d12 * d1) / det).clamp(0.0, 1.0 - b1);
+    (b1, b2)
 }

@@ -5,11 +5,11 @@
 use rand::Rng;
 use rayon::prelude::*;
 
-use super::{SurfaceNormals, point_on};
-use crate::bvh::Bvh;
+use super::{SurfaceNormals, barycentric};
 use crate::camera::{CameraRig, Ray};
-use crate::math::{V3, dot, neg};
+use crate::math::{V3, dot, madd, neg};
 use crate::mesh::TriMesh;
+use crate::raycast::RayCaster;
 use crate::seeding::{chunk_rng, par_generate};
 use crate::source::SurfaceSamples;
 
@@ -20,9 +20,9 @@ const PROBE_RAYS: usize = 16_384;
 const MAX_ATTEMPTS_PER_SAMPLE: usize = 20_000;
 
 /// A ray caster for one mesh and one camera rig. Invariant: `probe_hits` is non-empty.
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 pub struct VisibleSampler {
-    bvh: Bvh,
+    caster: RayCaster,
     rig: CameraRig,
     probe_hits: Vec<(V3, V3)>,
     hit_rate: f64,
@@ -32,14 +32,14 @@ impl VisibleSampler {
     /// Builds the BVH and probes the cameras; an error when none of the probe rays hits the mesh
     /// (cameras looking away, a camera file in the wrong coordinates, ...).
     pub fn new(mesh: &TriMesh, rig: CameraRig, normals: &SurfaceNormals) -> Result<Self, String> {
-        let bvh = Bvh::build(mesh);
+        let caster = RayCaster::build(mesh);
         let probes: Vec<Option<(V3, V3)>> = (0..PROBE_RAYS.div_ceil(1024))
             .into_par_iter()
             .flat_map_iter(|c| {
                 let mut rng = chunk_rng(0x5052_4f42, 0x7072_6f62, c as u64);
                 (0..1024).map(|_| rig.random_ray(&mut rng)).collect::<Vec<_>>()
             })
-            .map(|ray| first_hit(&bvh, mesh, normals, &ray))
+            .map(|ray| first_hit(&caster, mesh, normals, &ray))
             .collect();
         let total = probes.len();
         let probe_hits: Vec<(V3, V3)> = probes.into_iter().flatten().collect();
@@ -50,7 +50,7 @@ impl VisibleSampler {
             ));
         }
         let hit_rate = probe_hits.len() as f64 / total as f64;
-        Ok(VisibleSampler { bvh, rig, probe_hits, hit_rate })
+        Ok(VisibleSampler { caster, rig, probe_hits, hit_rate })
     }
 
     /// Fraction of camera rays that hit the mesh (measured at construction).
@@ -58,9 +58,9 @@ impl VisibleSampler {
         self.hit_rate
     }
 
-    /// The ray-casting hierarchy (for benchmarks and tests).
-    pub fn bvh(&self) -> &Bvh {
-        &self.bvh
+    /// The ray caster (for benchmarks and tests).
+    pub fn caster(&self) -> &RayCaster {
+        &self.caster
     }
 
     /// The camera rig.
@@ -77,7 +77,7 @@ impl VisibleSampler {
             while out.len() < count && attempts < count * MAX_ATTEMPTS_PER_SAMPLE {
                 attempts += 1;
                 let ray = self.rig.random_ray(rng);
-                if let Some(hit) = first_hit(&self.bvh, mesh, normals, &ray) {
+                if let Some(hit) = first_hit(&self.caster, mesh, normals, &ray) {
                     out.push(hit);
                 }
             }
@@ -92,10 +92,11 @@ impl VisibleSampler {
 }
 
 /// The first hit of `ray` with its normal turned towards the ray's origin.
-fn first_hit(bvh: &Bvh, mesh: &TriMesh, normals: &SurfaceNormals, ray: &Ray) -> Option<(V3, V3)> {
-    let hit = bvh.intersect(ray.origin, ray.dir, 0.0, f32::INFINITY)?;
+fn first_hit(caster: &RayCaster, mesh: &TriMesh, normals: &SurfaceNormals, ray: &Ray) -> Option<(V3, V3)> {
+    let hit = caster.intersect(ray.origin, ray.dir, f32::MAX)?;
     let f = hit.face as usize;
-    let p = point_on(mesh, f, hit.b1, hit.b2);
-    let n = normals.at(mesh, f, hit.b1, hit.b2);
+    let p = madd(ray.origin, hit.t, ray.dir);
+    let (b1, b2) = barycentric(mesh, f, p);
+    let n = normals.at(mesh, f, b1, b2);
     Some((p, if dot(n, ray.dir) > 0.0 { neg(n) } else { n }))
 }
