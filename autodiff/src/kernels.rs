@@ -187,6 +187,31 @@ pub(crate) fn column_sums(
     }
 }
 
+/// Per-column sums of a dense row-major `rows × cols` matrix `data`: the fast path of
+/// [`column_sums`] (same blocks, same order, so the same result), written to vectorise.
+pub(crate) fn column_sums_dense(dst: &mut [f32], data: &[f32], cols: usize, accumulate: bool) {
+    debug_assert_eq!(dst.len(), cols);
+    let rows = if cols == 0 { 0 } else { data.len() / cols };
+    let block = |b: usize| {
+        let mut acc = vec![0.0f64; cols];
+        let end = ((b + 1) * REDUCE_BLOCK_ROWS).min(rows);
+        for row in data[b * REDUCE_BLOCK_ROWS * cols..end * cols].chunks_exact(cols) {
+            acc.iter_mut().zip(row).for_each(|(a, &v)| *a += v as f64);
+        }
+        acc
+    };
+    let blocks = rows.div_ceil(REDUCE_BLOCK_ROWS);
+    let partials: Vec<Vec<f64>> = if rows * cols >= PAR_MIN_LEN {
+        (0..blocks).into_par_iter().map(block).collect()
+    } else {
+        (0..blocks).map(block).collect()
+    };
+    for (c, d) in dst.iter_mut().enumerate() {
+        let s: f64 = partials.iter().map(|p| p[c]).sum();
+        *d = if accumulate { *d + s as f32 } else { s as f32 };
+    }
+}
+
 /// Per-row sums of `value(r, c)` over `c`, written (or added) into `dst` (length `rows`).
 pub(crate) fn row_sums(
     dst: &mut [f32],
@@ -276,6 +301,10 @@ mod tests {
         column_sums(&mut cs, rows, cols, false, |r, c| (r % 7 + c) as f32);
         let want: Vec<f32> = (0..cols).map(|c| (0..rows).map(|r| (r % 7 + c) as f32).sum()).collect();
         assert_eq!(cs, want);
+        let dense: Vec<f32> = (0..rows * cols).map(|i| ((i / cols) % 7 + i % cols) as f32).collect();
+        let mut cd = vec![0.0; cols];
+        column_sums_dense(&mut cd, &dense, cols, false);
+        assert_eq!(cd, want);
         let total = total_sum(rows, cols, |r, c| (r % 7 + c) as f32);
         assert_eq!(total as f32, want.iter().sum::<f32>());
     }

@@ -15,15 +15,28 @@ use rand_chacha::ChaCha8Rng;
 
 #[derive(clap::Args)]
 pub struct BenchArgs {
-    /// What to measure.
+    /// What to measure: the engine's GEMMs and MLP steps (`all`, `gemm`, `mlp`), or a full Nuvo
+    /// training step on the bundled bunny (`step`, sized by `--charts/--depth/--width/--batch`).
     #[arg(value_enum, default_value = "all")]
     what: What,
-    /// Rows per batch.
+    /// Rows per batch (`step`: 3-D samples and UV samples each).
     #[arg(long, default_value_t = 4096)]
     batch: usize,
-    /// Timed iterations per case (after 3 warm-up iterations).
+    /// Timed iterations per case (after 3 warm-up iterations; `step`: 1 warm-up).
     #[arg(long, default_value_t = 20)]
     iters: usize,
+    /// `step`: number of charts.
+    #[arg(long, default_value_t = 4)]
+    charts: usize,
+    /// `step`: fully-connected layers per network.
+    #[arg(long, default_value_t = 8)]
+    depth: usize,
+    /// `step`: channels per hidden layer.
+    #[arg(long, default_value_t = 256)]
+    width: usize,
+    /// `step`: the mesh to sample.
+    #[arg(long, default_value = "assets/stanford-bunny.obj")]
+    mesh: std::path::PathBuf,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum, PartialEq)]
@@ -31,10 +44,14 @@ enum What {
     All,
     Mlp,
     Gemm,
+    Step,
 }
 
 pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     println!("threads: {}", rayon::current_num_threads());
+    if args.what == What::Step {
+        return step_case(args);
+    }
     if matches!(args.what, What::All | What::Gemm) {
         gemm_cases(args);
     }
@@ -44,6 +61,61 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// One full Nuvo training step (all eight losses, uniform samples of the mesh), timed, and the
+/// process's peak resident memory.
+fn step_case(args: &BenchArgs) -> anyhow::Result<()> {
+    let text = format!(
+        "[geometry]\nsource = \"mesh\"\npath = {:?}\n[model]\ncharts = {}\ndepth = {}\nwidth = {}\n\
+         [training]\nsteps = 1000\nbatch_3d = {}\nbatch_uv = {}\n",
+        args.mesh.display().to_string(),
+        args.charts,
+        args.depth,
+        args.width,
+        args.batch,
+        args.batch
+    );
+    let loaded = nuvo_core::config::from_str("bench.toml", &text)?;
+    let mut trainer = nuvo_core::Trainer::new(
+        &loaded,
+        &nuvo_geometry::SourceRegistry::with_builtins(),
+        &nuvo_losses::LossRegistry::with_builtins(),
+    )?;
+    let (c, t, s) = trainer.model().macs_per_point();
+    let (n, b) = (args.charts as f64, args.batch as f64);
+    // Forward MACs: c(x), t_i at x and two offsets, s_i(t_i(x)); s_i(u), t_i(s_i(u)), c(s_i(u)).
+    let fwd = 2.0 * (b * (c as f64 + 3.0 * n * t as f64 + n * s as f64) + b * n * (s + t + c) as f64);
+    trainer.step()?;
+    let mut times: Vec<f64> = (0..args.iters.max(1))
+        .map(|_| {
+            let start = Instant::now();
+            trainer.step().map(|_| start.elapsed().as_secs_f64())
+        })
+        .collect::<Result<_, _>>()?;
+    times.sort_by(f64::total_cmp);
+    let (median, min) = (times[times.len() / 2], times[0]);
+    println!(
+        "nuvo step n={} {}×{} batch {}+{}: median {:.3} s  min {:.3} s  ~{:.0} GFLOP/step (3× forward)  {:.1} GFLOP/s  peak RSS {}",
+        args.charts,
+        args.depth,
+        args.width,
+        args.batch,
+        args.batch,
+        median,
+        min,
+        3.0 * fwd / 1e9,
+        3.0 * fwd / median / 1e9,
+        peak_rss().map(|kb| format!("{:.0} MB", kb as f64 / 1024.0)).unwrap_or_else(|| "unknown".into())
+    );
+    Ok(())
+}
+
+/// Peak resident set size of this process in KiB (Linux `VmHWM`).
+fn peak_rss() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    line.split_whitespace().nth(1)?.parse().ok()
 }
 
 /// Median and minimum of `iters` timed runs of `f` after 3 warm-ups, in seconds.

@@ -89,7 +89,7 @@ pub(crate) fn backward(
     let dz = MatRef::new(g, Shape::new(sx.rows, sw.cols));
     if let Some(b) = b.filter(|&b| s.needs(b)) {
         let (db, fresh) = s.slot(b);
-        kernels::column_sums(db, sx.rows, sw.cols, !fresh, |i, j| g[i * sw.cols + j]);
+        kernels::column_sums_dense(db, g, sw.cols, !fresh);
     }
     if s.needs(w) {
         let (dw, fresh) = s.slot(w);

@@ -32,7 +32,7 @@ impl Tape {
         match axis {
             Axis::All => o[0] = kernels::total_sum(sa.rows, sa.cols, at) as f32,
             Axis::EachRow => kernels::row_sums(o, sa.cols, false, at),
-            Axis::EachCol => kernels::column_sums(o, sa.rows, sa.cols, false, at),
+            Axis::EachCol => kernels::column_sums_dense(o, x, sa.cols, false),
         }
         if mean {
             o.iter_mut().for_each(|v| *v *= scale);
