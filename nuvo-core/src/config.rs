@@ -78,6 +78,10 @@ pub struct ModelConfig {
     pub grid_resolution: Option<usize>,
     /// Initial value of the learned average stretch `σ`.
     pub sigma_init: f32,
+    /// Angular frequency (radians per unit of model-frame length) of the lowest positional-encoding
+    /// band: networks see `γ(encoding_scale · z)`. π is NeRF's convention; 1 is mip-NeRF's. Lower
+    /// values make the networks smoother across the object.
+    pub encoding_scale: f32,
 }
 
 impl Default for ModelConfig {
@@ -92,6 +96,7 @@ impl Default for ModelConfig {
             surface: NetworkOverrides::default(),
             grid_resolution: None,
             sigma_init: 1.0,
+            encoding_scale: std::f32::consts::PI,
         }
     }
 }
@@ -503,6 +508,9 @@ impl ExperimentConfig {
             return Err(src.invalid("model.grid_resolution", "must be between 2 and 4096"));
         }
         finite("model.sigma_init", m.sigma_init, src)?;
+        if !(m.encoding_scale.is_finite() && m.encoding_scale > 0.0) {
+            return Err(src.invalid("model.encoding_scale", "must be a positive number"));
+        }
         positive("training.batch_3d", t.batch_3d)?;
         positive("training.batch_uv", t.batch_uv)?;
         if t.steps == 0 {

@@ -5,9 +5,9 @@
 //! length 1 (`model = MODEL_FRAME_SCALE · canonical`, i.e. inside `[-0.5, 0.5]³`): the paper's loss
 //! weights balance squared 3-D distances against squared UV distances, and UV charts have side 1.
 //!
-//! **Encodings.** Each network sees `γ_L(π·z)` ([`nuvo_autodiff::Tape::posenc`]) of its input `z`
-//! centred in a unit-extent box: 3-D points as they are in the model frame, UVs as `u − ½`. So the
-//! frequencies are NeRF's `2^k·π` for `k < L` over the object's extent.
+//! **Encodings.** Each network sees `γ_L(ω·z)` ([`nuvo_autodiff::Tape::posenc`]) of its input `z`
+//! centred in a unit-extent box: 3-D points as they are in the model frame, UVs as `u − ½`; `ω` is
+//! `model.encoding_scale`, so the frequencies are `2^k·ω` for `k < L` per unit of the object's extent.
 
 use nuvo_autodiff::nn::{Mlp, MlpConfig};
 use nuvo_autodiff::{Activation, ParamId, ParamStore, Tape, Tensor, Var, posenc_width};
@@ -37,12 +37,14 @@ struct EncodedMlp {
     degree: usize,
     /// Subtracted from the input before encoding (centres UVs).
     center: f32,
+    /// Multiplies the centred input before encoding.
+    scale: f32,
 }
 
 impl EncodedMlp {
     fn forward(&self, tape: &mut Tape, z: Var) -> Var {
         let centred = if self.center != 0.0 { tape.add_scalar(z, -self.center) } else { z };
-        let scaled = tape.scale(centred, std::f32::consts::PI);
+        let scaled = tape.scale(centred, self.scale);
         let e = tape.posenc(scaled, self.degree);
         self.mlp.forward(tape, e)
     }
@@ -84,7 +86,7 @@ impl NuvoModel {
                 (posenc_width(inputs, degree), outputs, act),
                 rng,
             );
-            EncodedMlp { mlp, degree, center }
+            EncodedMlp { mlp, degree, center, scale: cfg.encoding_scale }
         };
         let chart = net(params, &mut rng, "chart", cfg.chart_shape(), (3, n, Activation::Identity), 0.0);
         let texture = (0..n)

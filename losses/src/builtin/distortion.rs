@@ -19,12 +19,20 @@ pub(super) const STRETCH: LossInfo = LossInfo {
     name: "stretch",
     summary: "c(x)-weighted squared difference between the UV parallelogram area and the learned σ",
     default_weight: 0.1,
-    options: &[OptionDoc {
-        name: "area",
-        default: "\"paper\"",
-        doc: "\"paper\": the area spanned by D t(εp), D t(εq) as in the paper (∝ ε²); \
-              \"jacobian\": that area / ε², the local UV area per unit surface area, independent of ε",
-    }],
+    options: &[
+        OptionDoc {
+            name: "area",
+            default: "\"paper\"",
+            doc: "\"paper\": the area spanned by D t(εp), D t(εq) as in the paper (∝ ε²); \
+                  \"jacobian\": that area / ε², the local UV area per unit surface area, independent of ε",
+        },
+        OptionDoc {
+            name: "signed",
+            default: "false",
+            doc: "use the signed area (positive when the UV image keeps the orientation of (p, q, n)), so \
+                  mirrored (folded) regions cost ≈ 4σ²; an extension of the paper, which uses |area|",
+        },
+    ],
 };
 
 /// `L_conformal = (1/|G|) Σ_x Σ_i c(x)[i] · cos²(D t_i(εp), D t_i(εq))`.
@@ -41,6 +49,10 @@ pub struct Stretch {
 pub struct StretchOptions {
     /// How the parallelogram area is measured; see [`AreaScale`].
     pub area: AreaScale,
+    /// Compare the *signed* area with σ (an extension of the paper, which uses the absolute area):
+    /// a mirrored region, where the map reverses the orientation of the tangent frame `(p, q, n)`,
+    /// then costs about `4σ²` instead of nothing, which pushes folded maps to cut and unfold.
+    pub signed: bool,
 }
 
 /// The scale of the stretch loss's area.
@@ -88,15 +100,16 @@ impl Loss for Conformal {
     }
 }
 
-/// The area of the parallelogram spanned by two 2-D vectors: `|a_u b_v − a_v b_u|` (`B×1`).
-fn parallelogram_area(ctx: &mut StepContext<'_>, a: Var, b: Var) -> Var {
+/// The area of the parallelogram spanned by two 2-D vectors, `a_u b_v − a_v b_u`, signed or its
+/// absolute value (`B×1`).
+fn parallelogram_area(ctx: &mut StepContext<'_>, a: Var, b: Var, signed: bool) -> Var {
     let t = &mut *ctx.tape;
     let (au, av) = (t.slice_cols(a, 0, 1), t.slice_cols(a, 1, 1));
     let (bu, bv) = (t.slice_cols(b, 0, 1), t.slice_cols(b, 1, 1));
     let l = t.mul(au, bv);
     let r = t.mul(av, bu);
     let cross = t.sub(l, r);
-    t.abs(cross)
+    if signed { cross } else { t.abs(cross) }
 }
 
 impl Loss for Stretch {
@@ -106,7 +119,7 @@ impl Loss for Stretch {
         let per_chart: Vec<Var> = (0..ctx.charts())
             .map(|i| {
                 let (a, b) = ctx.uv_differentials(i);
-                let area = parallelogram_area(ctx, a, b);
+                let area = parallelogram_area(ctx, a, b, self.options.signed);
                 let t = &mut *ctx.tape;
                 let area = match self.options.area {
                     AreaScale::Paper => area,
@@ -143,11 +156,22 @@ mod tests {
         // t(x) = (2x, y): area of (2ε, 0) and (0, ε) is 2ε² (paper) or 2 (jacobian); σ = 0.5.
         let scene = Scene::plane_points(&[[0.1, 0.2, 0.0]]).with_texture_scale(2.0).with_sigma(0.5);
         let eps = scene.epsilon();
-        let paper = Stretch { options: StretchOptions { area: AreaScale::Paper } };
+        let paper = Stretch { options: StretchOptions { area: AreaScale::Paper, signed: false } };
         let want = (2.0 * eps * eps - 0.5).powi(2);
         assert!((scene.evaluate(&paper) - want).abs() < 1e-4);
-        let jacobian = Stretch { options: StretchOptions { area: AreaScale::Jacobian } };
+        let jacobian = Stretch { options: StretchOptions { area: AreaScale::Jacobian, signed: false } };
         assert!((scene.evaluate(&jacobian) - 2.25).abs() < 2e-3, "{}", scene.evaluate(&jacobian));
+    }
+
+    #[test]
+    fn signed_stretch_charges_mirrored_maps() {
+        // t(x) = (−2x, y) mirrors the tangent frame: the signed area is −2 (jacobian units), so the
+        // loss is (−2 − 0.5)² = 6.25, against (2 − 0.5)² = 2.25 unsigned.
+        let scene = Scene::plane_points(&[[0.1, 0.2, 0.0]]).with_texture_scale(-2.0).with_sigma(0.5);
+        let signed = Stretch { options: StretchOptions { area: AreaScale::Jacobian, signed: true } };
+        assert!((scene.evaluate(&signed) - 6.25).abs() < 5e-3, "{}", scene.evaluate(&signed));
+        let unsigned = Stretch { options: StretchOptions { area: AreaScale::Jacobian, signed: false } };
+        assert!((scene.evaluate(&unsigned) - 2.25).abs() < 2e-3);
     }
 
     #[test]
@@ -165,6 +189,7 @@ mod tests {
     #[test]
     fn gradients_match_finite_differences() {
         check_loss_gradient(&Conformal);
-        check_loss_gradient(&Stretch { options: StretchOptions { area: AreaScale::Jacobian } });
+        check_loss_gradient(&Stretch { options: StretchOptions { area: AreaScale::Jacobian, signed: false } });
+        check_loss_gradient(&Stretch { options: StretchOptions { area: AreaScale::Jacobian, signed: true } });
     }
 }

@@ -1,0 +1,181 @@
+//! End-to-end tests of `nuvo train` and `nuvo bake` as a user runs them: a real process on the
+//! bundled bunny, with tiny networks so the suite stays fast.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+fn nuvo() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_nuvo"))
+}
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf()
+}
+
+/// A small experiment on the bundled bunny, written into `dir`.
+fn tiny_config(dir: &Path, steps: u64, checkpoint_every: u64) -> PathBuf {
+    let bunny = repo().join("assets/stanford-bunny.obj");
+    let text = format!(
+        r#"seed = 3
+[geometry]
+source = "mesh"
+path = {bunny:?}
+[model]
+charts = 2
+depth = 3
+width = 24
+grid_resolution = 16
+[training]
+steps = {steps}
+batch_3d = 256
+batch_uv = 256
+checkpoint_every = {checkpoint_every}
+[optimizer]
+lr_mlp = 2e-3
+[output]
+dir = "unused"
+atlas_resolution = 256
+eval_views = 2
+eval_resolution = 96
+renders = 1
+render_resolution = 96
+"#
+    );
+    let p = dir.join("tiny.toml");
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+fn run(cmd: &mut Command) -> Output {
+    let out = cmd.output().expect("nuvo runs");
+    if !out.status.success() {
+        eprintln!("stdout:\n{}\nstderr:\n{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    }
+    out
+}
+
+#[test]
+fn train_writes_every_output_a_script_relies_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = tiny_config(dir.path(), 12, 5);
+    let out_dir = dir.path().join("run");
+    let out = run(nuvo().arg("train").arg(&cfg).arg("--out").arg(&out_dir));
+    assert!(out.status.success());
+    for f in [
+        "config.toml",
+        "log.jsonl",
+        "checkpoint.safetensors",
+        "atlas.obj",
+        "atlas.mtl",
+        "atlas.glb",
+        "uv_layout.png",
+        "checker.png",
+        "normal_grids.png",
+        "metrics.json",
+        "renders/view_0.png",
+    ] {
+        assert!(out_dir.join(f).is_file(), "{f} missing");
+    }
+    let m: serde_json::Value = serde_json::from_slice(&std::fs::read(out_dir.join("metrics.json")).unwrap()).unwrap();
+    for k in ["boundary", "stretch", "conformal", "editability"] {
+        let v = m["metrics"]["image"][k].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&v), "{k} = {v}");
+    }
+    assert_eq!(m["steps"], 12);
+    assert_eq!(m["bake"]["faces"], 69451);
+    let log = std::fs::read_to_string(out_dir.join("log.jsonl")).unwrap();
+    assert_eq!(log.lines().count(), 12);
+    // The OBJ reads back with UVs on every face.
+    let mesh = nuvo_geometry_probe(&out_dir.join("atlas.obj"));
+    assert_eq!(mesh, (69451, true));
+}
+
+/// Face count and whether UVs are present, read with a minimal OBJ scan (no crate dependency).
+fn nuvo_geometry_probe(path: &Path) -> (usize, bool) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let faces: Vec<&str> = text.lines().filter(|l| l.starts_with("f ")).collect();
+    (faces.len(), faces.iter().all(|f| f.split_whitespace().skip(1).all(|c| c.contains('/'))))
+}
+
+#[test]
+fn a_run_killed_mid_way_resumes_to_the_same_parameters() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = tiny_config(dir.path(), 80, 10);
+    let full = dir.path().join("full");
+    assert!(run(nuvo().arg("train").arg(&cfg).arg("--out").arg(&full).arg("--no-bake")).status.success());
+
+    let killed = dir.path().join("killed");
+    let mut child = nuvo().arg("train").arg(&cfg).arg("--out").arg(&killed).arg("--no-bake").spawn().unwrap();
+    // Kill (SIGKILL) once a few checkpoints exist but before the end.
+    let log = killed.join("log.jsonl");
+    let start = Instant::now();
+    loop {
+        let lines = std::fs::read_to_string(&log).map(|t| t.lines().count()).unwrap_or(0);
+        if lines >= 35 || start.elapsed() > Duration::from_secs(120) {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    child.kill().unwrap();
+    let status = child.wait().unwrap();
+    assert!(!status.success(), "the run finished before it could be killed; raise its step count");
+    let out = run(nuvo().arg("train").arg(&cfg).arg("--out").arg(&killed).arg("--no-bake").arg("--resume"));
+    assert!(out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("resuming from step") || String::from_utf8_lossy(&out.stdout).contains("resuming from step"));
+    let a = std::fs::read(full.join("checkpoint.safetensors")).unwrap();
+    let b = std::fs::read(killed.join("checkpoint.safetensors")).unwrap();
+    assert!(a == b, "the resumed run's checkpoint differs from the uninterrupted run's");
+    let steps: Vec<u64> = std::fs::read_to_string(log)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["step"].as_u64().unwrap())
+        .collect();
+    assert_eq!(steps, (0..80).collect::<Vec<_>>(), "log has gaps or duplicates");
+}
+
+#[test]
+fn bake_redoes_the_outputs_from_a_run_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = tiny_config(dir.path(), 6, 3);
+    let run_dir = dir.path().join("run");
+    assert!(run(nuvo().arg("train").arg(&cfg).arg("--out").arg(&run_dir).arg("--no-bake")).status.success());
+    assert!(!run_dir.join("atlas.obj").exists());
+    let baked = dir.path().join("baked");
+    // From another working directory: the run folder is self-contained.
+    let out = run(nuvo().current_dir(dir.path()).arg("bake").arg(&run_dir).arg("--out").arg(&baked));
+    assert!(out.status.success());
+    assert!(baked.join("atlas.glb").is_file() && baked.join("metrics.json").is_file());
+}
+
+#[test]
+fn config_mistakes_exit_non_zero_with_the_file_line_and_choices() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = tiny_config(dir.path(), 5, 5);
+    let text = std::fs::read_to_string(&cfg).unwrap();
+    let cases: Vec<(&str, String, Vec<&str>)> = vec![
+        ("typo", text.replace("width = 24", "widht = 24"), vec!["tiny.toml line 8", "model.widht", "`width`"]),
+        ("wrong type", text.replace("steps = 5", "steps = \"five\""), vec!["training.steps", "line 11"]),
+        ("zero size", text.replace("batch_3d = 256", "batch_3d = 0"), vec!["training.batch_3d", "at least 1"]),
+        ("unknown loss", format!("{text}[losses.strech]\n"), vec!["losses.strech", "stretch"]),
+        ("unknown source", text.replace("\"mesh\"", "\"meshh\""), vec!["geometry.source", "mesh", "point_cloud"]),
+        ("syntax", text.replace("[model]", "[model"), vec!["tiny.toml", "line 5"]),
+        ("missing mesh", text.replace("stanford-bunny.obj", "no-such-bunny.obj"), vec!["no-such-bunny.obj"]),
+    ];
+    for (name, bad, needles) in cases {
+        std::fs::write(&cfg, &bad).unwrap();
+        let out = nuvo().arg("train").arg(&cfg).arg("--out").arg(dir.path().join(name)).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{name}: {err}");
+        for n in needles {
+            assert!(err.contains(n), "{name}: `{n}` not in: {err}");
+        }
+        assert!(!err.contains("panicked"), "{name}: {err}");
+        assert!(!dir.path().join(name).join("checkpoint.safetensors").exists(), "{name} left a checkpoint");
+    }
+    let out = nuvo().args(["train", "/no/such/config.toml"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("/no/such/config.toml"));
+    let out = nuvo().arg("train").arg(&cfg).args(["--set", "training.steps"]).output().unwrap();
+    assert!(String::from_utf8_lossy(&out.stderr).contains("KEY=VALUE"));
+}
