@@ -29,6 +29,7 @@ use nuvo_losses::Loss;
 pub use descriptor::{PluginInfo, PluginOption};
 pub use error::PluginError;
 pub use loss::PluginLoss;
+pub use nuvo_plugin_api::{Quantities, Quantity};
 
 /// Loads the plugin at `path` and creates a loss from `options` (the `[losses.NAME]` table without
 /// its `plugin` and `weight` keys, handed to the plugin as TOML text). Loading the same file again

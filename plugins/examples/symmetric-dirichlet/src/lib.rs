@@ -53,11 +53,7 @@ impl LossPlugin for SymmetricDirichlet {
     const DEFAULT_WEIGHT: f32 = 0.01;
     const OPTIONS: &'static [OptionDoc] = &[
         OptionDoc::new("scale", "1.0", "UV length per unit of surface length (model frame) at the optimum"),
-        OptionDoc::new(
-            "floor",
-            "1e-3",
-            "det(J)² is replaced by det(J)² + floor² in J⁻¹, bounding the energy",
-        ),
+        OptionDoc::new("floor", "0.1", "det(J)² is replaced by det(J)² + floor² in J⁻¹, bounding the energy"),
     ];
     const READS: Quantities = Quantities::of(&[Quantity::ChartProbs, Quantity::UvDifferentials]);
 
@@ -169,5 +165,20 @@ mod tests {
         let e = TestPlugin::new::<SymmetricDirichlet>("scale = -1.0").err().unwrap();
         assert!(e.contains("`scale` must be a positive number"), "{e}");
         assert!(TestPlugin::new::<SymmetricDirichlet>("").is_ok());
+    }
+
+    #[test]
+    fn documented_defaults_are_the_real_ones() {
+        let written: String = SymmetricDirichlet::OPTIONS
+            .iter()
+            .map(|o| format!("{} = {}\n", text(o.name), text(o.default)))
+            .collect();
+        assert_eq!(toml::from_str::<Options>(&written).unwrap(), Options::default());
+    }
+
+    /// A static descriptor string.
+    fn text(s: nuvo_plugin_api::abi::PluginStr) -> &'static str {
+        // SAFETY: `OptionDoc::new` built it from a `&'static str`.
+        unsafe { std::str::from_utf8_unchecked(std::slice::from_raw_parts(s.ptr, s.len)) }
     }
 }
