@@ -27,6 +27,8 @@
 //!   reported to nuvo instead of unwinding across the C boundary.
 //! - [`testing`]: drives a plugin through the same C entry points in-process, for unit tests.
 
+#![warn(missing_docs)]
+
 pub mod abi;
 pub mod export;
 mod matrix;

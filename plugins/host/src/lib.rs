@@ -15,6 +15,8 @@
 //! canonical path) is opened once. Calls into one library are serialised (the ABI's threading rule).
 //! Messages after loading name the plugin by its canonical path.
 
+#![warn(missing_docs)]
+
 mod buffers;
 mod descriptor;
 mod error;
