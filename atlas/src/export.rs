@@ -286,7 +286,7 @@ fn push_material(
     png: Option<&[u8]>,
 ) -> json::Index<json::Material> {
     let base_color_texture = png.map(|png| {
-        while bin.len() % 4 != 0 {
+        while !bin.len().is_multiple_of(4) {
             bin.push(0);
         }
         let offset = bin.len();
@@ -316,7 +316,7 @@ fn push_material(
         });
         json::texture::Info { index: texture, tex_coord: 0, extensions: None, extras: Default::default() }
     });
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     root.push(json::Material {

@@ -103,7 +103,7 @@ pub fn checkerboard(resolution: u32, cells: u32) -> Result<RgbImage, AtlasError>
     }
     let cell = |p: u32| (p as u64 * cells as u64 / resolution as u64) as u32;
     let colour = |i: u32, j: u32| {
-        let light = (i + j) % 2 == 0;
+        let light = (i + j).is_multiple_of(2);
         hsv(i as f64 / cells as f64, if light { 0.35 } else { 0.75 }, if light { 0.98 } else { 0.55 })
     };
     let mut img = RgbImage::from_fn(resolution, resolution, |x, y| {

@@ -191,7 +191,7 @@ pub(crate) fn column_sums(
 /// [`column_sums`] (same blocks, same order, so the same result), written to vectorise.
 pub(crate) fn column_sums_dense(dst: &mut [f32], data: &[f32], cols: usize, accumulate: bool) {
     debug_assert_eq!(dst.len(), cols);
-    let rows = if cols == 0 { 0 } else { data.len() / cols };
+    let rows = data.len().checked_div(cols).unwrap_or(0);
     let block = |b: usize| {
         let mut acc = vec![0.0f64; cols];
         let end = ((b + 1) * REDUCE_BLOCK_ROWS).min(rows);

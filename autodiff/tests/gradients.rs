@@ -257,7 +257,8 @@ fn the_checker_catches_a_wrong_derivative() {
             let grad: Vec<f32> = xs.iter().enumerate().map(|(i, &x)| wrong(x, i)).collect();
             t.custom_scalar(&[v[0]], value, &[&grad])
         };
-        let err: GradCheckError = check_gradients(f, &[x.clone()], GradCheck::default()).unwrap_err();
+        let err: GradCheckError =
+            check_gradients(f, std::slice::from_ref(&x), GradCheck::default()).unwrap_err();
         assert!(!err.0.is_empty());
     }
 }

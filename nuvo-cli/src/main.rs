@@ -3,6 +3,7 @@
 mod bench;
 mod demo;
 mod eval;
+mod losses;
 mod train;
 
 use std::process::ExitCode;
@@ -29,6 +30,8 @@ enum Command {
     Demo(demo::DemoArgs),
     /// Measure the engine: MLP forward+backward steps and raw GEMM throughput.
     Bench(bench::BenchArgs),
+    /// List the built-in losses and describe loss plugins (--plugin PATH), with their options.
+    Losses(losses::LossesArgs),
 }
 
 fn main() -> ExitCode {
@@ -38,6 +41,7 @@ fn main() -> ExitCode {
         Command::Eval(args) => eval::run(&args),
         Command::Demo(args) => demo::run(&args),
         Command::Bench(args) => bench::run(&args),
+        Command::Losses(args) => losses::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

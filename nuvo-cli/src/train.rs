@@ -151,7 +151,7 @@ fn describe(o: &StepOutcome) -> String {
 impl Observer for Progress {
     fn started(&mut self, trainer: &Trainer, resumed_from: Option<u64>) {
         if let Some(s) = resumed_from {
-            self.bar.println(format!("resuming from step {s}"));
+            self.note(&format!("resuming from step {s}"));
         }
         self.bar.set_position(trainer.step_index());
         self.started = Instant::now();
@@ -160,7 +160,7 @@ impl Observer for Progress {
     fn stepped(&mut self, o: &StepOutcome, _: &Trainer) {
         self.bar.set_position(o.step + 1);
         self.bar.set_message(describe(o));
-        if self.bar.is_hidden() && ((o.step + 1) % self.every == 0 || o.step + 1 == self.total) {
+        if self.bar.is_hidden() && ((o.step + 1).is_multiple_of(self.every) || o.step + 1 == self.total) {
             eprintln!(
                 "step {}/{} ({:.0} s): {}",
                 o.step + 1,

@@ -50,7 +50,11 @@ render_resolution = 96
 fn run(cmd: &mut Command) -> Output {
     let out = cmd.output().expect("nuvo runs");
     if !out.status.success() {
-        eprintln!("stdout:\n{}\nstderr:\n{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+        eprintln!(
+            "stdout:\n{}\nstderr:\n{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
     }
     out
 }
@@ -77,7 +81,8 @@ fn train_writes_every_output_a_script_relies_on() {
     ] {
         assert!(out_dir.join(f).is_file(), "{f} missing");
     }
-    let m: serde_json::Value = serde_json::from_slice(&std::fs::read(out_dir.join("metrics.json")).unwrap()).unwrap();
+    let m: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out_dir.join("metrics.json")).unwrap()).unwrap();
     for k in ["boundary", "stretch", "conformal", "editability"] {
         let v = m["metrics"]["image"][k].as_f64().unwrap();
         assert!((0.0..=1.0).contains(&v), "{k} = {v}");
@@ -122,7 +127,10 @@ fn a_run_killed_mid_way_resumes_to_the_same_parameters() {
     assert!(!status.success(), "the run finished before it could be killed; raise its step count");
     let out = run(nuvo().arg("train").arg(&cfg).arg("--out").arg(&killed).arg("--no-bake").arg("--resume"));
     assert!(out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("resuming from step") || String::from_utf8_lossy(&out.stdout).contains("resuming from step"));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("resuming from step")
+            || String::from_utf8_lossy(&out.stdout).contains("resuming from step")
+    );
     let a = std::fs::read(full.join("checkpoint.safetensors")).unwrap();
     let b = std::fs::read(killed.join("checkpoint.safetensors")).unwrap();
     assert!(a == b, "the resumed run's checkpoint differs from the uninterrupted run's");
@@ -154,11 +162,23 @@ fn config_mistakes_exit_non_zero_with_the_file_line_and_choices() {
     let cfg = tiny_config(dir.path(), 5, 5);
     let text = std::fs::read_to_string(&cfg).unwrap();
     let cases: Vec<(&str, String, Vec<&str>)> = vec![
-        ("typo", text.replace("width = 24", "widht = 24"), vec!["tiny.toml line 8", "model.widht", "`width`"]),
+        (
+            "typo",
+            text.replace("width = 24", "widht = 24"),
+            vec!["tiny.toml line 8", "model.widht", "`width`"],
+        ),
         ("wrong type", text.replace("steps = 5", "steps = \"five\""), vec!["training.steps", "line 11"]),
-        ("zero size", text.replace("batch_3d = 256", "batch_3d = 0"), vec!["training.batch_3d", "at least 1"]),
+        (
+            "zero size",
+            text.replace("batch_3d = 256", "batch_3d = 0"),
+            vec!["training.batch_3d", "at least 1"],
+        ),
         ("unknown loss", format!("{text}[losses.strech]\n"), vec!["losses.strech", "stretch"]),
-        ("unknown source", text.replace("\"mesh\"", "\"meshh\""), vec!["geometry.source", "mesh", "point_cloud"]),
+        (
+            "unknown source",
+            text.replace("\"mesh\"", "\"meshh\""),
+            vec!["geometry.source", "mesh", "point_cloud"],
+        ),
         ("syntax", text.replace("[model]", "[model"), vec!["tiny.toml", "line 5"]),
         ("missing mesh", text.replace("stanford-bunny.obj", "no-such-bunny.obj"), vec!["no-such-bunny.obj"]),
     ];

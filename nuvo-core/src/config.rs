@@ -458,7 +458,8 @@ impl ModelConfig {
 
 impl ExperimentConfig {
     /// Makes the input paths written in the file absolute (`base` is the config's folder): every
-    /// `path` or `file` key inside `[geometry]` (at any depth) and `output.bake_mesh`. The resolved
+    /// `path` or `file` key inside `[geometry]` (at any depth), each `losses.NAME.plugin`, and
+    /// `output.bake_mesh`. The resolved
     /// config saved with a run then works from any working directory (for `nuvo bake`, `--resume`).
     pub fn absolutize_paths(&mut self, base: &Path) {
         fn visit(t: &mut toml::Table, base: &Path) {
@@ -475,6 +476,13 @@ impl ExperimentConfig {
             }
         }
         visit(&mut self.geometry.options, base);
+        for loss in self.losses.iter_mut().flat_map(|l| l.values_mut()) {
+            if let Some(toml::Value::String(p)) = loss.options.get_mut("plugin")
+                && Path::new(p.as_str()).is_relative()
+            {
+                *p = base.join(&*p).to_string_lossy().into_owned();
+            }
+        }
         if let Some(m) = self.output.bake_mesh.as_mut().filter(|m| m.is_relative()) {
             *m = base.join(&*m);
         }

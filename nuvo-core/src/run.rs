@@ -136,7 +136,7 @@ pub fn run(
             consecutive_bad = 0;
         }
         summary.last = Some(outcome);
-        if trainer.step_index() % every == 0 && consecutive_bad == 0 {
+        if trainer.step_index().is_multiple_of(every) && consecutive_bad == 0 {
             snapshot = trainer.checkpoint();
             snapshot.save(&ckpt_path)?;
         }

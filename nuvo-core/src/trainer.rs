@@ -346,18 +346,37 @@ fn build_terms(
         Some(map) => map.iter().map(|(k, l)| (k.clone(), l.weight, l.options.clone())).collect(),
     };
     let mut terms = Vec::new();
-    for (name, weight, options) in listed {
-        let info = registry.info(&name).ok_or_else(|| {
-            src.invalid(
-                &format!("losses.{name}"),
-                format!("unknown loss `{name}`; known losses: {}", registry.names()),
-            )
-        })?;
-        let weight = weight.unwrap_or(info.default_weight);
-        let loss = registry.build(&name, &options).map_err(|e| match e {
-            LossError::Options { message, .. } => src.serde_error(&format!("losses.{name}"), &message),
-            other => src.invalid(&format!("losses.{name}"), other.to_string()),
-        })?;
+    for (name, weight, mut options) in listed {
+        let key = format!("losses.{name}");
+        // `plugin = "path"`: a run-time loss plugin (nuvo-plugin-host); the path is relative to the
+        // config file, or to the working directory when set with --set.
+        let (loss, default_weight) = if let Some(plugin) = options.remove("plugin") {
+            let at = format!("{key}.plugin");
+            let path = plugin.as_str().ok_or_else(|| {
+                src.invalid(&at, "must be a string: the path of the plugin's shared library")
+            })?;
+            let base = if src.is_overridden(&at) {
+                std::env::current_dir().unwrap_or_default()
+            } else {
+                src.base_dir()
+            };
+            let (loss, info) =
+                nuvo_plugin_host::load_loss_plugin(&base.join(path), &options).map_err(|e| match e {
+                    nuvo_plugin_host::PluginError::Options { message, .. } => src.serde_error(&key, &message),
+                    other => src.invalid(&at, other.to_string()),
+                })?;
+            (loss, info.default_weight)
+        } else {
+            let info = registry.info(&name).ok_or_else(|| {
+                src.invalid(&key, format!("unknown loss `{name}`; known losses: {}", registry.names()))
+            })?;
+            let loss = registry.build(&name, &options).map_err(|e| match e {
+                LossError::Options { message, .. } => src.serde_error(&key, &message),
+                other => src.invalid(&key, other.to_string()),
+            })?;
+            (loss, info.default_weight)
+        };
+        let weight = weight.unwrap_or(default_weight);
         if weight > 0.0 {
             terms.push(Term { name, weight, loss });
         }

@@ -189,7 +189,9 @@ mod tests {
     #[test]
     fn gradients_match_finite_differences() {
         check_loss_gradient(&Conformal);
-        check_loss_gradient(&Stretch { options: StretchOptions { area: AreaScale::Jacobian, signed: false } });
+        check_loss_gradient(&Stretch {
+            options: StretchOptions { area: AreaScale::Jacobian, signed: false },
+        });
         check_loss_gradient(&Stretch { options: StretchOptions { area: AreaScale::Jacobian, signed: true } });
     }
 }
