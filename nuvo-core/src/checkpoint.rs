@@ -1,9 +1,11 @@
 //! Checkpoints: every parameter and the optimiser state in one safetensors file.
 //!
-//! Layout: tensors `param/NAME`, `adam_m/NAME`, `adam_v/NAME` (f32, `[rows, cols]`), and string
-//! metadata `format = "nuvo-checkpoint"`, `version`, `step`, `adam_steps`, `lr_scale`, `config` (the
-//! resolved TOML) and `to_canonical` (JSON of the geometry's input → canonical map). safetensors is
-//! readable from PyTorch and numpy, so researchers can inspect trained networks directly.
+//! Layout: tensors `param/NAME`, `adam_m/NAME`, `adam_v/NAME` (f32, `[rows, cols]`), and one string
+//! metadata entry `nuvo`: a JSON object `{format: "nuvo-checkpoint", version, step, adam_steps,
+//! lr_scale, config (the resolved TOML), to_canonical}`. One entry, with fields in a fixed order,
+//! because safetensors writes its metadata map in hash order: with several entries, the same state
+//! would give different bytes in different processes. safetensors is readable from PyTorch and
+//! numpy, so researchers can inspect trained networks directly.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -50,6 +52,21 @@ pub enum CheckpointError {
     Invalid { path: PathBuf, message: String },
 }
 
+/// The `nuvo` metadata entry (field order is the serialised order).
+#[derive(serde::Serialize, serde::Deserialize)]
+struct Meta {
+    format: String,
+    version: u32,
+    step: u64,
+    adam_steps: u64,
+    lr_scale: f32,
+    config: String,
+    to_canonical: Similarity,
+}
+
+/// The metadata key.
+const META_KEY: &str = "nuvo";
+
 fn le_bytes(values: &[f32]) -> Vec<u8> {
     values.iter().flat_map(|v| v.to_le_bytes()).collect()
 }
@@ -75,16 +92,17 @@ impl Checkpoint {
                 ))
             })
             .collect::<Result<Vec<_>, CheckpointError>>()?;
-        let frame = serde_json::to_string(&self.to_canonical).map_err(|e| invalid(e.to_string()))?;
-        let metadata = HashMap::from([
-            ("format".to_owned(), FORMAT.to_owned()),
-            ("version".to_owned(), VERSION.to_string()),
-            ("step".to_owned(), self.step.to_string()),
-            ("adam_steps".to_owned(), adam_steps.to_string()),
-            ("lr_scale".to_owned(), self.lr_scale.to_string()),
-            ("config".to_owned(), self.config_toml.clone()),
-            ("to_canonical".to_owned(), frame),
-        ]);
+        let meta = Meta {
+            format: FORMAT.to_owned(),
+            version: VERSION,
+            step: self.step,
+            adam_steps: *adam_steps,
+            lr_scale: self.lr_scale,
+            config: self.config_toml.clone(),
+            to_canonical: self.to_canonical,
+        };
+        let json = serde_json::to_string(&meta).map_err(|e| invalid(e.to_string()))?;
+        let metadata = HashMap::from([(META_KEY.to_owned(), json)]);
         let bytes = safetensors::serialize(views, Some(metadata)).map_err(|e| invalid(e.to_string()))?;
         write_atomic(path, &bytes).map_err(|source| CheckpointError::Io { path: path.to_owned(), source })
     }
@@ -97,26 +115,22 @@ impl Checkpoint {
         let st =
             SafeTensors::deserialize(&bytes).map_err(|e| invalid(format!("not a safetensors file ({e})")))?;
         let (_, meta) = SafeTensors::read_metadata(&bytes).map_err(|e| invalid(e.to_string()))?;
-        let meta = meta.metadata().clone().unwrap_or_default();
-        let get = |k: &str| meta.get(k).ok_or_else(|| invalid(format!("metadata `{k}` is missing")));
-        if get("format")? != FORMAT {
-            return Err(invalid(format!("its format is `{}`, not `{FORMAT}`", get("format")?)));
+        let entry = meta
+            .metadata()
+            .as_ref()
+            .and_then(|m| m.get(META_KEY))
+            .ok_or_else(|| invalid(format!("metadata `{META_KEY}` is missing")))?;
+        let meta: Meta =
+            serde_json::from_str(entry).map_err(|e| invalid(format!("metadata `{META_KEY}`: {e}")))?;
+        if meta.format != FORMAT {
+            return Err(invalid(format!("its format is `{}`, not `{FORMAT}`", meta.format)));
         }
-        let version: u32 = get("version")?.parse().map_err(|_| invalid("unreadable version".into()))?;
-        if version != VERSION {
+        if meta.version != VERSION {
             return Err(invalid(format!(
-                "it is format version {version}; this build of nuvo reads version {VERSION}"
+                "it is format version {}; this build of nuvo reads version {VERSION}",
+                meta.version
             )));
         }
-        let number = |k: &str| -> Result<u64, CheckpointError> {
-            get(k)?.parse().map_err(|_| invalid(format!("metadata `{k}` is not a number")))
-        };
-        let step = number("step")?;
-        let adam_steps = number("adam_steps")?;
-        let lr_scale: f32 =
-            get("lr_scale")?.parse().map_err(|_| invalid("metadata `lr_scale` is not a number".into()))?;
-        let to_canonical: Similarity = serde_json::from_str(get("to_canonical")?)
-            .map_err(|e| invalid(format!("metadata `to_canonical`: {e}")))?;
         let read = |name: &str| -> Result<Tensor, CheckpointError> {
             let t = st.tensor(name).map_err(|e| invalid(format!("tensor `{name}`: {e}")))?;
             let (shape, data) = (t.shape(), t.data());
@@ -138,12 +152,12 @@ impl Checkpoint {
             v.push(read(&format!("adam_v/{name}"))?.into_vec());
         }
         Ok(Checkpoint {
-            step,
-            lr_scale,
-            config_toml: get("config")?.clone(),
-            to_canonical,
+            step: meta.step,
+            lr_scale: meta.lr_scale,
+            config_toml: meta.config,
+            to_canonical: meta.to_canonical,
             params,
-            adam: (adam_steps, m, v),
+            adam: (meta.adam_steps, m, v),
         })
     }
 }
@@ -190,7 +204,16 @@ mod tests {
         let bytes = safetensors::serialize([("x", view)], None).unwrap();
         std::fs::write(&p, bytes).unwrap();
         let e = Checkpoint::load(&p).unwrap_err().to_string();
-        assert!(e.contains("format"), "{e}");
+        assert!(e.contains("metadata"), "{e}");
+    }
+
+    #[test]
+    fn the_same_checkpoint_always_gives_the_same_bytes() {
+        let dir = tempfile::tempdir().unwrap();
+        let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+        sample().save(&a).unwrap();
+        sample().save(&b).unwrap();
+        assert_eq!(std::fs::read(a).unwrap(), std::fs::read(b).unwrap());
     }
 
     #[test]

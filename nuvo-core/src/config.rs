@@ -337,9 +337,10 @@ pub fn load(path: &Path, overrides: &[String]) -> Result<LoadedConfig, ConfigErr
         let key = apply_override(&mut tree, arg, &cwd)?;
         source.overridden.insert(key);
     }
-    let config = ExperimentConfig::deserialize(toml::Value::Table(tree))
+    let mut config = ExperimentConfig::deserialize(toml::Value::Table(tree))
         .map_err(|e| source.serde_error("", &e.to_string()))?;
     config.validate(&source)?;
+    config.absolutize_paths(&cwd.join(source.base_dir()));
     Ok(LoadedConfig { config, source })
 }
 

@@ -279,14 +279,19 @@ impl Trainer {
         (probs, uvs)
     }
 
-    /// A checkpoint of the current state.
+    /// A checkpoint of the current state. Its config describes the experiment, not where or how
+    /// long it ran: `output.dir` and the time budget are left at their defaults, so the same
+    /// experiment gives the same checkpoint bytes wherever it is written.
     pub fn checkpoint(&self) -> Checkpoint {
         let p = self.tape.params();
         let (m, v) = self.adam.moments();
+        let mut config = self.config.clone();
+        config.output.dir = crate::config::OutputConfig::default().dir;
+        config.training.time_budget_minutes = None;
         Checkpoint {
             step: self.step,
             lr_scale: self.lr_scale,
-            config_toml: toml::to_string(&self.config).unwrap_or_default(),
+            config_toml: toml::to_string(&config).unwrap_or_default(),
             to_canonical: self.source.to_canonical(),
             params: p.ids().map(|id| (p.info(id).name.clone(), p.value(id).clone())).collect(),
             adam: (self.adam.steps(), m.to_vec(), v.to_vec()),
