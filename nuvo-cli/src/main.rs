@@ -1,5 +1,6 @@
 //! The `nuvo` command line.
 
+mod ablate;
 mod bench;
 mod demo;
 mod eval;
@@ -22,6 +23,8 @@ struct Cli {
 enum Command {
     /// Train an atlas from an experiment config, then bake, export, draw and measure it.
     Train(train::TrainArgs),
+    /// Train the base config and its loss-ablation variants, then write the paper's ablation table.
+    Ablate(ablate::AblateArgs),
     /// Bake, export, draw and measure the atlas of a run folder or checkpoint.
     Bake(train::BakeArgs),
     /// Measure a mesh's UVs: the paper's Boundary/Stretch/Conformal/Editability and UV statistics.
@@ -37,6 +40,7 @@ enum Command {
 fn main() -> ExitCode {
     let result = match Cli::parse().command {
         Command::Train(args) => train::train(&args),
+        Command::Ablate(args) => ablate::run(&args),
         Command::Bake(args) => train::bake(&args),
         Command::Eval(args) => eval::run(&args),
         Command::Demo(args) => demo::run(&args),
@@ -53,7 +57,7 @@ fn main() -> ExitCode {
 }
 
 /// The error and its causes on one line, skipping a cause whose text its parent already shows.
-fn one_line(e: &anyhow::Error) -> String {
+pub(crate) fn one_line(e: &anyhow::Error) -> String {
     let mut msg = String::new();
     for cause in e.chain().map(|c| c.to_string()) {
         if !msg.contains(&cause) {

@@ -120,7 +120,7 @@ fn print_report(report: &OutputReport, seconds: f64) {
 
 /// A progress bar with the step, every loss term and the ETA; plain lines when stderr is not a
 /// terminal.
-struct Progress {
+pub(crate) struct Progress {
     bar: ProgressBar,
     total: u64,
     every: u64,
@@ -128,7 +128,7 @@ struct Progress {
 }
 
 impl Progress {
-    fn new(total: u64) -> Self {
+    pub(crate) fn new(total: u64) -> Self {
         let bar = ProgressBar::new(total);
         bar.set_style(
             ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} ETA {eta_precise}  {msg}")
@@ -138,7 +138,7 @@ impl Progress {
         Progress { bar, total, every: (total / 20).max(1), started: Instant::now() }
     }
 
-    fn finish(&self) {
+    pub(crate) fn finish(&self) {
         self.bar.finish_and_clear();
     }
 }

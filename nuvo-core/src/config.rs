@@ -43,6 +43,9 @@ pub struct ExperimentConfig {
     /// Where results go.
     #[serde(default)]
     pub output: OutputConfig,
+    /// `[ablation]`: the variants `nuvo ablate` runs (ignored by `nuvo train`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ablation: Option<crate::ablation::AblationConfig>,
 }
 
 /// `[geometry]`: which registered source, and its own options (checked by the source itself).
@@ -319,6 +322,16 @@ pub struct LoadedConfig {
 /// Reads `path`, applies `overrides` (`key.path=value`, the value in TOML syntax or else a bare
 /// string) and validates the result.
 pub fn load(path: &Path, overrides: &[String]) -> Result<LoadedConfig, ConfigError> {
+    load_edited(path, overrides, |_, _| Ok(()))
+}
+
+/// [`load`], with `edit` changing the parsed tree after the overrides and before it is checked (the
+/// ablation runner removes loss entries this way). `edit` gets the tree and the source, for errors.
+pub fn load_edited(
+    path: &Path,
+    overrides: &[String],
+    edit: impl FnOnce(&mut toml::Table, &ConfigSource) -> Result<(), ConfigError>,
+) -> Result<LoadedConfig, ConfigError> {
     if path.is_dir() {
         return Err(ConfigError::Io {
             path: path.to_owned(),
@@ -337,6 +350,7 @@ pub fn load(path: &Path, overrides: &[String]) -> Result<LoadedConfig, ConfigErr
         let key = apply_override(&mut tree, arg, &cwd)?;
         source.overridden.insert(key);
     }
+    edit(&mut tree, &source)?;
     let mut config = ExperimentConfig::deserialize(toml::Value::Table(tree))
         .map_err(|e| source.serde_error("", &e.to_string()))?;
     config.validate(&source)?;

@@ -4,11 +4,13 @@
 //! - [`model`]: the `2n + 1` networks, `σ` and the normal grids;
 //! - [`trainer`]: one deterministic optimisation step at a time;
 //! - [`run`]: the output folder, checkpoints, log, resume, budget and NaN rollback;
-//! - [`checkpoint`]: the safetensors checkpoint format.
+//! - [`checkpoint`]: the safetensors checkpoint format;
+//! - [`ablation`]: sweeps of config variants and the paper's ablation table.
 //!
 //! Geometry sources and losses come from registries ([`nuvo_geometry::SourceRegistry`],
 //! [`nuvo_losses::LossRegistry`]), so an application can add its own before building a [`Trainer`].
 
+pub mod ablation;
 pub mod batch;
 pub mod checkpoint;
 pub mod config;

@@ -1,0 +1,149 @@
+//! `nuvo ablate CONFIG`: train the base config and its variants one after another, then write the
+//! paper's ablation table (Markdown and CSV) next to the per-variant run folders.
+
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::Context;
+use nuvo_core::ablation::{self, Row, Variant, VariantError};
+use nuvo_core::config;
+use nuvo_geometry::SourceRegistry;
+use nuvo_geometry::fsio::write_bytes_atomic;
+use nuvo_losses::LossRegistry;
+
+use crate::train::Progress;
+
+#[derive(clap::Args)]
+pub struct AblateArgs {
+    /// The base experiment config; its `[ablation]` table lists the variants (default: the base plus
+    /// one run per loss with that loss removed).
+    config: PathBuf,
+    /// Sweep folder (default: the config's `output.dir`): one sub-folder per variant, plus
+    /// `ablation.md` and `ablation.csv`.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Override a value of the base config for every variant (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    set: Vec<String>,
+    /// Run only the variants with these names or folder names (repeatable).
+    #[arg(long = "only", value_name = "NAME")]
+    only: Vec<String>,
+    /// Reuse finished variants' metrics and continue interrupted ones from their checkpoints.
+    #[arg(long)]
+    resume: bool,
+    /// Print the planned variants and exit.
+    #[arg(long)]
+    dry_run: bool,
+}
+
+pub fn run(args: &AblateArgs) -> anyhow::Result<()> {
+    let losses = LossRegistry::with_builtins();
+    let sources = SourceRegistry::with_builtins();
+    let base = config::load(&args.config, &args.set)?;
+    let out = args.out.clone().unwrap_or_else(|| base.config.output.dir.clone());
+    let variants = selected(ablation::plan(&base, &losses), &args.only)?;
+    if args.dry_run {
+        for v in &variants {
+            println!(
+                "{:<24} -> {}  remove {:?}  set {:?}",
+                v.name,
+                out.join(&v.dir_name).display(),
+                v.remove,
+                v.set
+            );
+        }
+        return Ok(());
+    }
+    std::fs::create_dir_all(&out)?;
+    let mut rows = Vec::new();
+    for (k, v) in variants.iter().enumerate() {
+        println!("[{}/{}] {} -> {}", k + 1, variants.len(), v.name, out.join(&v.dir_name).display());
+        let started = Instant::now();
+        let result = run_one(args, v, &out, (&sources, &losses));
+        let row = Row {
+            name: v.name.clone(),
+            dir: out.join(&v.dir_name),
+            result,
+            seconds: started.elapsed().as_secs_f64(),
+        };
+        match &row.result {
+            Ok(s) => println!(
+                "[{}/{}] {}: Boundary {:.3}  Stretch {:.3}  Conformal {:.3}  UV Eff. {:.3}  Avg. {:.3}  ({:.0} s)",
+                k + 1,
+                variants.len(),
+                v.name,
+                s.boundary,
+                s.stretch,
+                s.conformal,
+                s.uv_efficiency,
+                s.average(),
+                row.seconds
+            ),
+            Err(e) => println!("[{}/{}] {}: FAILED: {e}", k + 1, variants.len(), v.name),
+        }
+        rows.push(row);
+        write_tables(&out, &rows)?;
+    }
+    println!("\n{}", ablation::markdown_table(&rows));
+    println!("wrote {} and {}", out.join("ablation.md").display(), out.join("ablation.csv").display());
+    let failed = rows.iter().filter(|r| r.result.is_err()).count();
+    if failed > 0 {
+        anyhow::bail!("{failed} of {} variants failed (see the table for why)", rows.len());
+    }
+    Ok(())
+}
+
+/// The planned variants restricted to `only` (names or folder names); an unknown name lists the
+/// planned ones.
+fn selected(variants: Vec<Variant>, only: &[String]) -> anyhow::Result<Vec<Variant>> {
+    if only.is_empty() {
+        return Ok(variants);
+    }
+    for o in only {
+        if !variants.iter().any(|v| &v.name == o || &v.dir_name == o) {
+            let names: Vec<&str> = variants.iter().map(|v| v.dir_name.as_str()).collect();
+            anyhow::bail!("--only {o}: no such variant; planned: {}", names.join(", "));
+        }
+    }
+    Ok(variants.into_iter().filter(|v| only.iter().any(|o| o == &v.name || o == &v.dir_name)).collect())
+}
+
+/// Loads, trains, bakes and measures one variant; any failure, even a panic, becomes the row's error.
+fn run_one(
+    args: &AblateArgs,
+    v: &Variant,
+    out: &std::path::Path,
+    registries: (&SourceRegistry, &LossRegistry),
+) -> Result<ablation::Scores, String> {
+    let attempt = || -> Result<ablation::Scores, VariantError> {
+        let loaded = ablation::load_variant(&args.config, &args.set, v, registries.1)?;
+        let mut progress = Progress::new(loaded.config.training.steps);
+        let scores =
+            ablation::run_variant(&loaded, &out.join(&v.dir_name), args.resume, registries, &mut progress);
+        progress.finish();
+        scores
+    };
+    match catch_unwind(AssertUnwindSafe(attempt)) {
+        Ok(r) => r.map_err(|e| crate::one_line(&anyhow::Error::new(e))),
+        Err(panic) => Err(format!(
+            "internal error (panic): {}",
+            panic
+                .downcast_ref::<String>()
+                .map(String::as_str)
+                .or(panic.downcast_ref::<&str>().copied())
+                .unwrap_or("?")
+        )),
+    }
+}
+
+fn write_tables(out: &std::path::Path, rows: &[Row]) -> anyhow::Result<()> {
+    for (name, text) in
+        [("ablation.md", ablation::markdown_table(rows)), ("ablation.csv", ablation::csv_table(rows))]
+    {
+        let path = out.join(name);
+        write_bytes_atomic(&path, text.as_bytes())
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    Ok(())
+}

@@ -1,0 +1,127 @@
+//! End-to-end test of `nuvo ablate`: a tiny sweep on the bundled bunny with one variant that cannot
+//! run, checking the table, the per-variant folders, that the failure is reported and not fatal, and
+//! that `--resume` reuses finished variants.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn nuvo() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_nuvo"))
+}
+
+fn sweep_config(dir: &Path) -> PathBuf {
+    let bunny = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/stanford-bunny.obj");
+    let text = format!(
+        r#"seed = 1
+[geometry]
+source = "mesh"
+path = {bunny:?}
+[model]
+charts = 2
+depth = 2
+width = 16
+grid_resolution = 8
+[training]
+steps = 3
+batch_3d = 128
+batch_uv = 128
+[losses.cycle_3d]
+[losses.cycle_2d]
+[losses.surface]
+[losses.texture]
+[output]
+atlas_resolution = 64
+eval_views = 1
+eval_resolution = 48
+renders = 0
+[ablation]
+remove_each = ["texture", "surface"]
+[[ablation.variants]]
+name = "n=1"
+set = ["model.charts=1"]
+[[ablation.variants]]
+name = "broken"
+set = ["model.charts=0"]
+"#
+    );
+    let p = dir.join("sweep.toml");
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+fn run(cmd: &mut Command) -> Output {
+    let out = cmd.output().expect("nuvo runs");
+    eprintln!(
+        "stdout:\n{}\nstderr:\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+#[test]
+fn a_sweep_writes_the_table_and_reports_a_failed_variant_without_stopping() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = sweep_config(dir.path());
+    let out = dir.path().join("sweep");
+    let o = run(nuvo().arg("ablate").arg(&cfg).arg("--out").arg(&out));
+    assert!(!o.status.success(), "a failed variant makes the exit status non-zero");
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(stderr.contains("1 of 5 variants failed"), "{stderr}");
+
+    let csv = std::fs::read_to_string(out.join("ablation.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    let names: Vec<&str> = rows.iter().map(|r| r[0]).collect();
+    assert_eq!(names, ["base", "w/o texture", "w/o surface", "n=1", "broken"]);
+    for r in &rows[..4] {
+        assert_eq!(r[10], "ok", "{r:?}");
+        for v in &r[2..8] {
+            let v: f64 = v.parse().unwrap();
+            assert!((0.0..=1.0).contains(&v), "{r:?}");
+        }
+        assert_eq!(r[8], "3", "steps");
+    }
+    assert_eq!(rows[4][10], "failed");
+    let broken = csv.lines().last().unwrap();
+    assert!(broken.contains("model.charts") && broken.contains("must be at least 1"), "{csv}");
+    let md = std::fs::read_to_string(out.join("ablation.md")).unwrap();
+    assert!(md.contains("| w/o texture |") && md.contains("| broken | failed:"), "{md}");
+
+    // Removing a loss really removes it from the variant's resolved config and its log.
+    let resolved = std::fs::read_to_string(out.join("wo_texture/config.toml")).unwrap();
+    assert!(!resolved.contains("[losses.texture]") && resolved.contains("[losses.surface]"), "{resolved}");
+    assert!(!resolved.contains("[ablation]"), "{resolved}");
+    let log = std::fs::read_to_string(out.join("wo_texture/log.jsonl")).unwrap();
+    assert!(!log.contains("\"texture\"") && log.contains("\"surface\""));
+    assert!(std::fs::read_to_string(out.join("n-1/config.toml")).unwrap().contains("charts = 1"));
+    assert!(out.join("base/atlas.obj").exists() && out.join("n-1/metrics.json").exists());
+
+    // --resume reuses the finished variants: the table is the same and nothing is retrained.
+    let before = std::fs::metadata(out.join("base/checkpoint.safetensors")).unwrap().modified().unwrap();
+    let o = run(nuvo()
+        .arg("ablate")
+        .arg(&cfg)
+        .arg("--out")
+        .arg(&out)
+        .arg("--resume")
+        .args(["--only", "base", "--only", "n=1"]));
+    assert!(o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("reusing its metrics"));
+    let after = std::fs::metadata(out.join("base/checkpoint.safetensors")).unwrap().modified().unwrap();
+    assert_eq!(before, after);
+    let csv2 = std::fs::read_to_string(out.join("ablation.csv")).unwrap();
+    assert_eq!(csv2.lines().nth(1).unwrap().split(',').take(9).collect::<Vec<_>>(), rows[0][..9]);
+}
+
+#[test]
+fn unknown_variant_names_list_the_planned_ones() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = sweep_config(dir.path());
+    let o = run(nuvo().arg("ablate").arg(&cfg).args(["--only", "nope", "--dry-run"]));
+    assert!(!o.status.success());
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        stderr.contains("--only nope") && stderr.contains("wo_texture, wo_surface, n-1, broken"),
+        "{stderr}"
+    );
+}
