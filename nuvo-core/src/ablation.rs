@@ -257,11 +257,12 @@ pub fn run_variant(
     observer: &mut dyn Observer,
 ) -> Result<Scores, VariantError> {
     let metrics_path = dir.join("metrics.json");
-    if resume && let Some(done) = Scores::read(&metrics_path) {
-        if done.steps >= loaded.config.training.steps {
-            observer.note(&format!("{} already finished; reusing its metrics", dir.display()));
-            return Ok(done);
-        }
+    if resume
+        && let Some(done) = Scores::read(&metrics_path)
+        && done.steps >= loaded.config.training.steps
+    {
+        observer.note(&format!("{} already finished; reusing its metrics", dir.display()));
+        return Ok(done);
     }
     let mut trainer = Trainer::new(loaded, registries.0, registries.1)?;
     let resume = resume && dir.join(crate::run::files::CHECKPOINT).exists();
