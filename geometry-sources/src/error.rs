@@ -59,4 +59,16 @@ impl GeometryError {
     pub fn invalid(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
         Self::Invalid { path: path.into(), message: message.into() }
     }
+
+    /// Refuses a directory where a file is expected, before the extension dispatch would report a
+    /// confusing "unsupported extension" or the OS an unexplained "Is a directory".
+    pub(crate) fn require_file(path: &std::path::Path) -> Result<(), Self> {
+        if path.is_dir() {
+            return Err(Self::invalid(
+                path,
+                "is a directory, not a file; give the path of the file inside it",
+            ));
+        }
+        Ok(())
+    }
 }

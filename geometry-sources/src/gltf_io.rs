@@ -21,6 +21,21 @@ struct Part {
     uvs: Option<Vec<[f32; 2]>>,
 }
 
+/// Names the external buffer files of `document` that cannot be read, as ` (unreadable: a.bin)`,
+/// since the glTF crate's error says only what the OS said.
+fn unreadable_buffers(document: &gltf::Document, base: &Path) -> String {
+    let missing: Vec<String> = document
+        .buffers()
+        .filter_map(|b| match b.source() {
+            gltf::buffer::Source::Uri(uri) if !uri.starts_with("data:") && !base.join(uri).is_file() => {
+                Some(uri.to_owned())
+            }
+            _ => None,
+        })
+        .collect();
+    if missing.is_empty() { String::new() } else { format!(" (unreadable: {})", missing.join(", ")) }
+}
+
 /// Reads a `.gltf` (with external or embedded buffers) or `.glb` file.
 ///
 /// - Meshes are instanced through the node hierarchy of the default scene (the first scene when none
@@ -40,8 +55,9 @@ pub fn load_gltf(path: &Path) -> Result<TriMesh, GeometryError> {
     check_position_accessors(unchecked.document.as_json()).map_err(bad)?;
     let document = gltf::Document::from_json(unchecked.document.into_json()).map_err(not_gltf)?;
     let base = path.parent().unwrap_or(Path::new("."));
-    let buffers = gltf::import_buffers(&document, Some(base), unchecked.blob)
-        .map_err(|e| bad(format!("cannot load the glTF buffers: {e}")))?;
+    let buffers = gltf::import_buffers(&document, Some(base), unchecked.blob).map_err(|e| {
+        bad(format!("cannot load the glTF buffers: {e}{}", unreadable_buffers(&document, base)))
+    })?;
     let mut parts = Vec::new();
     for (mesh, matrix) in mesh_instances(&document).map_err(bad)? {
         for (p, prim) in mesh.primitives().enumerate() {

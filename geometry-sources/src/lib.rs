@@ -48,6 +48,7 @@ pub mod xyz;
 pub use error::GeometryError;
 pub use frame::{Aabb, Similarity};
 pub use load::load_mesh;
+pub use math::MAX_COORDINATE;
 pub use mesh::{TriMesh, UvLayer};
 pub use registry::{BuildContext, SourceBuilder, SourceRegistry};
 pub use source::{GeometrySource, SurfaceSamples};

@@ -12,6 +12,7 @@ pub const MESH_EXTENSIONS: &[&str] = &["obj", "gltf", "glb"];
 /// when the file has them for every face. The result is validated ([`TriMesh::validate`]) and has at
 /// least one face; degenerate faces are kept (see [`TriMesh::has_area`]).
 pub fn load_mesh(path: &Path) -> Result<TriMesh, GeometryError> {
+    GeometryError::require_file(path)?;
     let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).unwrap_or_default();
     match ext.as_str() {
         "obj" => crate::obj::load_obj(path),

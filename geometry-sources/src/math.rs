@@ -45,3 +45,19 @@ pub(crate) fn neg(a: V3) -> V3 {
 pub(crate) fn is_finite(a: V3) -> bool {
     a.iter().all(|c| c.is_finite())
 }
+
+/// Largest coordinate magnitude accepted from a file: squared distances and edge cross products of
+/// inputs this large would overflow f32 (max ≈ 3.4e38) before the input is normalised.
+pub const MAX_COORDINATE: f32 = 1e18;
+
+/// Why a position read from a file is unusable, if it is: `"a non-finite coordinate"` or one beyond
+/// ±[`MAX_COORDINATE`].
+pub(crate) fn coordinate_problem(a: V3) -> Option<&'static str> {
+    if !is_finite(a) {
+        Some("a non-finite coordinate")
+    } else if a.iter().any(|c| c.abs() > MAX_COORDINATE) {
+        Some("a coordinate beyond ±1e18, which would overflow f32 areas and distances (rescale the input)")
+    } else {
+        None
+    }
+}

@@ -1,7 +1,7 @@
 //! The triangle mesh shared by every crate that reads, bakes, exports or measures meshes.
 
 use crate::frame::{Aabb, Similarity};
-use crate::math::{add, cross, norm, normalize, sub};
+use crate::math::{add, coordinate_problem, cross, norm, normalize, sub};
 
 /// A triangle mesh, optionally with texture coordinates.
 ///
@@ -92,8 +92,10 @@ impl TriMesh {
 
     /// Checks the invariants listed on the type, reporting the first violation in words.
     pub fn validate(&self) -> Result<(), String> {
-        if let Some(i) = self.positions.iter().position(|p| p.iter().any(|c| !c.is_finite())) {
-            return Err(format!("vertex {} has a non-finite coordinate {:?}", i + 1, self.positions[i]));
+        for (i, p) in self.positions.iter().enumerate() {
+            if let Some(problem) = coordinate_problem(*p) {
+                return Err(format!("vertex {} has {problem}: {p:?}", i + 1));
+            }
         }
         let nv = self.positions.len();
         for (f, t) in self.triangles.iter().enumerate() {

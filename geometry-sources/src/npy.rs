@@ -52,6 +52,7 @@ struct Header {
 
 /// Reads a `.npy` file.
 pub fn read_npy(path: &Path) -> Result<NpyArray, GeometryError> {
+    GeometryError::require_file(path)?;
     let bytes = std::fs::read(path).map_err(|e| GeometryError::Io { path: path.to_path_buf(), source: e })?;
     parse_npy(&bytes).map_err(|m| GeometryError::malformed(path, m))
 }

@@ -18,7 +18,7 @@ use serde::Deserialize;
 use crate::error::GeometryError;
 use crate::frame::{Aabb, Similarity};
 use crate::load::dotted;
-use crate::math::{V3, is_finite, normalize};
+use crate::math::{V3, coordinate_problem, normalize};
 use crate::options::{options_error, parse_options};
 use crate::ply::{PointSet, read_ply};
 use crate::registry::BuildContext;
@@ -101,11 +101,10 @@ impl PointCloudSource {
         if positions.is_empty() {
             return Err(GeometryError::invalid(&path, "the file holds no points"));
         }
-        if let Some(i) = positions.iter().position(|p| !is_finite(*p)) {
-            return Err(GeometryError::invalid(
-                &path,
-                format!("point {} has a non-finite coordinate {:?}", i + 1, positions[i]),
-            ));
+        for (i, p) in positions.iter().enumerate() {
+            if let Some(problem) = coordinate_problem(*p) {
+                return Err(GeometryError::invalid(&path, format!("point {} has {problem}: {p:?}", i + 1)));
+            }
         }
         let raw = Aabb::from_points(&positions).ok_or_else(|| GeometryError::invalid(&path, "no points"))?;
         let to_canonical = Similarity::normalizing(&raw);
@@ -143,6 +142,7 @@ impl PointCloudSource {
 
 /// Reads a point file by extension.
 pub fn read_points(path: &std::path::Path) -> Result<PointSet, GeometryError> {
+    GeometryError::require_file(path)?;
     let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).unwrap_or_default();
     match ext.as_str() {
         "ply" => read_ply(path),

@@ -442,7 +442,11 @@ mod tests {
         let csv = csv_table(&rows);
         let lines: Vec<&str> = csv.lines().collect();
         assert_eq!(lines.len(), 4);
-        assert!(lines[1].starts_with("base,r/base,1.000000,0.500000,0.500000,0.500000,0.625000,0.250000,10,3.0,ok,"), "{csv}");
+        assert!(
+            lines[1]
+                .starts_with("base,r/base,1.000000,0.500000,0.500000,0.500000,0.625000,0.250000,10,3.0,ok,"),
+            "{csv}"
+        );
         assert_eq!(lines[3], "\"bad, one\",r/bad,,,,,,,,0.0,failed,\"no \"\"x\"\" | y\"");
     }
 

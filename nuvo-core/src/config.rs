@@ -279,6 +279,9 @@ impl ConfigSource {
     /// on the command line.
     pub fn locate(&self, key: &str) -> String {
         let file = self.path.display();
+        if key.is_empty() {
+            return file.to_string();
+        }
         if self.overridden.iter().any(|o| key == o || key.starts_with(&format!("{o}."))) {
             return format!("{file}, key `{key}` (set with --set)");
         }

@@ -25,6 +25,13 @@ pub enum TrainError {
     Config(#[from] ConfigError),
     #[error(transparent)]
     Geometry(#[from] GeometryError),
+    /// The config's geometry could not be loaded; `config` locates the key that named it.
+    #[error("{config}: {source}")]
+    Source {
+        config: String,
+        #[source]
+        source: GeometryError,
+    },
     #[error(transparent)]
     Loss(#[from] LossError),
     #[error(transparent)]
@@ -102,7 +109,14 @@ impl Trainer {
                 GeometryError::UnknownSource { .. } => {
                     TrainError::Config(src.invalid("geometry.source", e.to_string()))
                 }
-                other => TrainError::Geometry(other),
+                other => {
+                    let key = if config.geometry.options.contains_key("path") {
+                        "geometry.path"
+                    } else {
+                        "geometry"
+                    };
+                    TrainError::Source { config: src.locate(key), source: other }
+                }
             })?;
         let terms = build_terms(&config, loaded, losses)?;
         let mut params = ParamStore::new();

@@ -1,1 +1,7 @@
-//! Shared helpers for the end-to-end tests live in `tests/tests/`; this crate has no library code.
+//! Test helpers shared by the end-to-end suites: a generated corpus of malformed inputs.
+//!
+//! The corpus is written by code, not checked in as blobs, so each case says what is wrong with it
+//! and the suites (`nuvo-cli/tests/malformed.rs`, `tests/tests/`) can assert on the error a user
+//! sees.
+
+pub mod corpus;
