@@ -1,0 +1,30 @@
+//! The fuzzer's regression suite: every finding kept in `tests/fuzz-findings/` is read without a
+//! panic, and a short deterministic fuzzing session per parser finds nothing.
+
+use std::path::Path;
+use std::time::Duration;
+
+use nuvo_tests::fuzz::{Target, findings_in, fuzz};
+
+#[test]
+fn kept_findings_no_longer_panic() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz-findings");
+    let scratch = tempfile::tempdir().unwrap();
+    for t in Target::ALL {
+        for f in findings_in(&dir, t) {
+            let bytes = std::fs::read(&f).unwrap();
+            assert_eq!(t.check(&bytes, scratch.path()), Ok(()), "{}", f.display());
+        }
+    }
+}
+
+#[test]
+fn a_short_session_per_parser_finds_no_panic() {
+    let scratch = tempfile::tempdir().unwrap();
+    for t in Target::ALL {
+        let report = fuzz(t, 7, 400, Duration::from_secs(60), scratch.path());
+        assert!(report.runs >= 100, "{}: only {} runs", t.name(), report.runs);
+        let messages: Vec<&String> = report.findings.iter().map(|(_, m)| m).collect();
+        assert!(messages.is_empty(), "{}: {messages:?}", t.name());
+    }
+}
