@@ -199,3 +199,29 @@ fn config_mistakes_exit_non_zero_with_the_file_line_and_choices() {
     let out = nuvo().arg("train").arg(&cfg).args(["--set", "training.steps"]).output().unwrap();
     assert!(String::from_utf8_lossy(&out.stderr).contains("KEY=VALUE"));
 }
+
+#[test]
+fn one_and_two_threads_give_bit_identical_checkpoints_and_uvs() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = tiny_config(dir.path(), 6, 100);
+    let mut outputs = Vec::new();
+    for threads in ["1", "2"] {
+        let out = dir.path().join(format!("t{threads}"));
+        // Wide enough that the GEMMs and elementwise kernels take their parallel paths.
+        let big =
+            ["--set", "model.width=64", "--set", "training.batch_3d=2048", "--set", "training.batch_uv=2048"];
+        let o = run(nuvo()
+            .env("RAYON_NUM_THREADS", threads)
+            .arg("train")
+            .arg(&cfg)
+            .args(big)
+            .arg("--out")
+            .arg(&out));
+        assert!(o.status.success());
+        let ckpt = std::fs::read(out.join("checkpoint.safetensors")).unwrap();
+        let obj = std::fs::read(out.join("atlas.obj")).unwrap();
+        outputs.push((ckpt, obj));
+    }
+    assert!(outputs[0].0 == outputs[1].0, "checkpoints differ between 1 and 2 threads");
+    assert!(outputs[0].1 == outputs[1].1, "baked UVs differ between 1 and 2 threads");
+}
