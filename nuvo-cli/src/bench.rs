@@ -106,16 +106,11 @@ fn step_case(args: &BenchArgs) -> anyhow::Result<()> {
         min,
         3.0 * fwd / 1e9,
         3.0 * fwd / median / 1e9,
-        peak_rss().map(|kb| format!("{:.0} MB", kb as f64 / 1024.0)).unwrap_or_else(|| "unknown".into())
+        crate::peak_rss_kib()
+            .map(|kb| format!("{:.0} MB", kb as f64 / 1024.0))
+            .unwrap_or_else(|| "unknown".into())
     );
     Ok(())
-}
-
-/// Peak resident set size of this process in KiB (Linux `VmHWM`).
-fn peak_rss() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    line.split_whitespace().nth(1)?.parse().ok()
 }
 
 /// Median and minimum of `iters` timed runs of `f` after 3 warm-ups, in seconds.

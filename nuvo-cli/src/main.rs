@@ -67,3 +67,10 @@ pub(crate) fn one_line(e: &anyhow::Error) -> String {
     }
     msg
 }
+
+/// Peak resident set size of this process in KiB (Linux `VmHWM`; `None` elsewhere).
+pub(crate) fn peak_rss_kib() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    line.split_whitespace().nth(1)?.parse().ok()
+}

@@ -49,8 +49,9 @@ pub fn train(args: &TrainArgs) -> anyhow::Result<()> {
     let opts = RunOptions { out_dir: out_dir.clone(), resume: args.resume };
     let summary = run(&mut trainer, &opts, &mut progress)?;
     progress.finish();
+    let rss = crate::peak_rss_kib().map(|k| format!(", peak RSS {} MB", k / 1024)).unwrap_or_default();
     println!(
-        "trained {} steps in {:.1} s ({} skipped, {} rollbacks){}; run folder {}",
+        "trained {} steps in {:.1} s ({} skipped, {} rollbacks{rss}){}; run folder {}",
         summary.steps,
         summary.seconds,
         summary.skipped,
@@ -61,7 +62,11 @@ pub fn train(args: &TrainArgs) -> anyhow::Result<()> {
     if args.no_bake || !loaded.config.output.bake {
         return Ok(());
     }
-    bake_into(&mut trainer, &out_dir, &loaded)
+    bake_into(&mut trainer, &out_dir, &loaded)?;
+    if let Some(k) = crate::peak_rss_kib() {
+        println!("peak RSS {} MB over the whole run", k / 1024);
+    }
+    Ok(())
 }
 
 pub fn bake(args: &BakeArgs) -> anyhow::Result<()> {

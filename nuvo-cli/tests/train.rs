@@ -5,59 +5,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
-fn nuvo() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_nuvo"))
-}
-
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf()
-}
-
-/// A small experiment on the bundled bunny, written into `dir`.
-fn tiny_config(dir: &Path, steps: u64, checkpoint_every: u64) -> PathBuf {
-    let bunny = repo().join("assets/stanford-bunny.obj");
-    let text = format!(
-        r#"seed = 3
-[geometry]
-source = "mesh"
-path = {bunny:?}
-[model]
-charts = 2
-depth = 3
-width = 24
-grid_resolution = 16
-[training]
-steps = {steps}
-batch_3d = 256
-batch_uv = 256
-checkpoint_every = {checkpoint_every}
-[optimizer]
-lr_mlp = 2e-3
-[output]
-dir = "unused"
-atlas_resolution = 256
-eval_views = 2
-eval_resolution = 96
-renders = 1
-render_resolution = 96
-"#
-    );
-    let p = dir.join("tiny.toml");
-    std::fs::write(&p, text).unwrap();
-    p
-}
-
-fn run(cmd: &mut Command) -> Output {
-    let out = cmd.output().expect("nuvo runs");
-    if !out.status.success() {
-        eprintln!(
-            "stdout:\n{}\nstderr:\n{}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        );
-    }
-    out
-}
+mod common;
+use common::{nuvo, repo, run, tiny_config};
 
 #[test]
 fn train_writes_every_output_a_script_relies_on() {
