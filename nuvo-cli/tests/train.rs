@@ -1,12 +1,11 @@
 //! End-to-end tests of `nuvo train` and `nuvo bake` as a user runs them: a real process on the
 //! bundled bunny, with tiny networks so the suite stays fast.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{nuvo, repo, run, tiny_config};
+use common::{nuvo, run, tiny_config};
 
 #[test]
 fn train_writes_every_output_a_script_relies_on() {
