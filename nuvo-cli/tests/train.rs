@@ -173,3 +173,38 @@ fn one_and_two_threads_give_bit_identical_checkpoints_and_uvs() {
     assert!(outputs[0].0 == outputs[1].0, "checkpoints differ between 1 and 2 threads");
     assert!(outputs[0].1 == outputs[1].1, "baked UVs differ between 1 and 2 threads");
 }
+
+#[test]
+fn repeated_kills_while_checkpointing_every_step_still_resume_to_the_same_parameters() {
+    // With a checkpoint after every step the process spends much of its time writing one, so the
+    // kills below land inside checkpoint writes too; the atomic write (temp file + rename) must
+    // leave the previous checkpoint intact every time.
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = tiny_config(dir.path(), 60, 1);
+    let full = dir.path().join("full");
+    assert!(run(nuvo().arg("train").arg(&cfg).arg("--out").arg(&full).arg("--no-bake")).status.success());
+    let killed = dir.path().join("killed");
+    let log = killed.join("log.jsonl");
+    for (round, lines) in [7usize, 19, 26, 38, 51].into_iter().enumerate() {
+        let mut cmd = nuvo();
+        cmd.arg("train").arg(&cfg).arg("--out").arg(&killed).arg("--no-bake");
+        if round > 0 {
+            cmd.arg("--resume");
+        }
+        let mut child =
+            cmd.stdout(std::process::Stdio::null()).stderr(std::process::Stdio::null()).spawn().unwrap();
+        let start = Instant::now();
+        while std::fs::read_to_string(&log).map(|t| t.lines().count()).unwrap_or(0) < lines
+            && start.elapsed() < Duration::from_secs(60)
+        {
+            std::thread::sleep(Duration::from_micros(300));
+        }
+        child.kill().unwrap();
+        child.wait().unwrap();
+    }
+    let out = run(nuvo().arg("train").arg(&cfg).arg("--out").arg(&killed).arg("--no-bake").arg("--resume"));
+    assert!(out.status.success());
+    let a = std::fs::read(full.join("checkpoint.safetensors")).unwrap();
+    let b = std::fs::read(killed.join("checkpoint.safetensors")).unwrap();
+    assert!(a == b, "after five kills the resumed run's checkpoint differs from the uninterrupted run's");
+}
