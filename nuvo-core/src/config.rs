@@ -192,6 +192,11 @@ pub struct LossConfig {
     /// Weight of the term; absent means the registry's default (the paper's weight).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub weight: Option<f32>,
+    /// Ramp the weight linearly from 0 to `weight` over this many first steps (0 or absent: full
+    /// weight from the start). A curriculum knob, not in the paper: e.g. let the cycle losses find a
+    /// bijection before the distortion terms start shaping it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub warmup_steps: Option<u64>,
     /// Every other key, handed to the loss's builder.
     #[serde(flatten)]
     pub options: toml::Table,

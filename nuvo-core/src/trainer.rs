@@ -56,7 +56,20 @@ pub struct Term {
     pub name: String,
     /// Its weight (> 0; zero-weight terms are not built).
     pub weight: f32,
+    /// Steps over which the weight ramps up linearly from 0 (0: none).
+    pub warmup_steps: u64,
     loss: Box<dyn Loss>,
+}
+
+impl Term {
+    /// The weight at 0-based `step`: `weight · min(1, (step + 1) / warmup_steps)`.
+    pub fn weight_at(&self, step: u64) -> f32 {
+        if step >= self.warmup_steps {
+            self.weight
+        } else {
+            self.weight * (step + 1) as f32 / self.warmup_steps as f32
+        }
+    }
 }
 
 /// What one step did.
@@ -238,7 +251,7 @@ impl Trainer {
             }
             let v = term.loss.evaluate(&mut ctx)?;
             values.push((term.name.clone(), ctx.tape.scalar(v)));
-            let w = ctx.tape.scale(v, term.weight);
+            let w = ctx.tape.scale(v, term.weight_at(self.step));
             total = Some(match total {
                 None => w,
                 Some(t) => ctx.tape.add(t, w),
@@ -360,12 +373,15 @@ fn build_terms(
     registry: &LossRegistry,
 ) -> Result<Vec<Term>, TrainError> {
     let src = &loaded.source;
-    let listed: Vec<(String, Option<f32>, toml::Table)> = match &config.losses {
-        None => registry.list().map(|i| (i.name.to_owned(), None, toml::Table::new())).collect(),
-        Some(map) => map.iter().map(|(k, l)| (k.clone(), l.weight, l.options.clone())).collect(),
+    type Listed = (String, Option<f32>, Option<u64>, toml::Table);
+    let listed: Vec<Listed> = match &config.losses {
+        None => registry.list().map(|i| (i.name.to_owned(), None, None, toml::Table::new())).collect(),
+        Some(map) => {
+            map.iter().map(|(k, l)| (k.clone(), l.weight, l.warmup_steps, l.options.clone())).collect()
+        }
     };
     let mut terms = Vec::new();
-    for (name, weight, mut options) in listed {
+    for (name, weight, warmup_steps, mut options) in listed {
         let key = format!("losses.{name}");
         // `plugin = "path"`: a run-time loss plugin (nuvo-plugin-host); the path is relative to the
         // config file, or to the working directory when set with --set.
@@ -397,7 +413,7 @@ fn build_terms(
         };
         let weight = weight.unwrap_or(default_weight);
         if weight > 0.0 {
-            terms.push(Term { name, weight, loss });
+            terms.push(Term { name, weight, warmup_steps: warmup_steps.unwrap_or(0), loss });
         }
     }
     Ok(terms)

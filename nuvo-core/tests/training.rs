@@ -336,3 +336,20 @@ fn atlas_evaluation_gives_probabilities_and_unit_square_uvs() {
     }
     assert!(uv.iter().all(|&u| (0.0..=1.0).contains(&u)));
 }
+
+#[test]
+fn a_warmed_up_term_ramps_its_weight_and_the_total_follows() {
+    let plain = "[losses.cycle_3d]\n[losses.surface]\n";
+    let warm = "[losses.cycle_3d]\n[losses.surface]\nwarmup_steps = 4\n";
+    let mut a = trainer(&small(plain));
+    let mut b = trainer(&small(warm));
+    let surface = &b.terms()[1];
+    assert_eq!(surface.name, "surface");
+    let ramp: Vec<f32> = (0..6).map(|s| surface.weight_at(s)).collect();
+    assert_eq!(ramp, [2.5, 5.0, 7.5, 10.0, 10.0, 10.0]);
+    // Step 0: the same batch and parameters, so the totals differ by exactly 3/4 of the surface term.
+    let (oa, ob) = (a.step().unwrap(), b.step().unwrap());
+    let surface_value = oa.terms.iter().find(|(n, _)| n == "surface").unwrap().1;
+    assert_eq!(oa.terms, ob.terms, "unweighted values are logged unchanged");
+    assert!((oa.total - ob.total - 0.75 * 10.0 * surface_value).abs() < 1e-4 * oa.total.abs().max(1.0));
+}
