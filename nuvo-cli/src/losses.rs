@@ -24,7 +24,10 @@ pub fn run(args: &LossesArgs) -> anyhow::Result<()> {
 
 /// The whole listing.
 fn listing(registry: &LossRegistry, plugins: &[PluginInfo]) -> String {
-    let mut out = String::from("Built-in losses (a [losses.NAME] table in a config enables one):\n");
+    let mut out = String::from(
+        "Built-in losses (a [losses.NAME] table in a config enables one; every table also takes\n\
+         `weight` and `warmup_steps`, which ramps the weight in linearly over the first steps):\n",
+    );
     for info in registry.list() {
         builtin(&mut out, info);
     }
