@@ -18,25 +18,26 @@ pub struct Linear {
 }
 
 impl Linear {
-    /// Registers `{name}.w` and `{name}.b` in `params` (group `group`). Weights are uniform with the
-    /// bound that keeps activations' variance steady through `act`: He for ReLU (`√(6/in)`), Glorot
-    /// otherwise (`√(6/(in+out))`); biases start at zero.
+    /// Registers `{name}.w` and `{name}.b` in `params` (group `group`). Weights and biases are
+    /// uniform in `±1/√in`, PyTorch's `nn.Linear` default, whatever the activation.
+    ///
+    /// Why not He (`√(6/in)`): on Nuvo's cycle losses (a flat square, 4×128 ReLU MLPs behind a
+    /// degree-4 positional encoding, 1000 steps) He-initialised networks start from maps so folded
+    /// that training never unfolds them (cycle loss 6.5e-3, 44% of the square flipped), while this
+    /// init reaches 1.0e-4 and 4% (BENCHMARKS.md, "Initialisation").
     pub fn new(
         params: &mut ParamStore,
         name: &str,
         group: &str,
         in_dim: usize,
         out_dim: usize,
-        act: Activation,
         rng: &mut impl Rng,
     ) -> Self {
-        let bound = match act {
-            Activation::Relu => (6.0 / in_dim.max(1) as f32).sqrt(),
-            _ => (6.0 / (in_dim + out_dim).max(1) as f32).sqrt(),
-        };
+        let bound = 1.0 / (in_dim.max(1) as f32).sqrt();
         let w: Vec<f32> = (0..in_dim * out_dim).map(|_| rng.random_range(-bound..=bound)).collect();
+        let b: Vec<f32> = (0..out_dim).map(|_| rng.random_range(-bound..=bound)).collect();
         let weight = params.add(format!("{name}.w"), group, Tensor::from_vec(in_dim, out_dim, w));
-        let bias = params.add(format!("{name}.b"), group, Tensor::zeros(1, out_dim));
+        let bias = params.add(format!("{name}.b"), group, Tensor::from_vec(1, out_dim, b));
         Linear { weight, bias, in_dim, out_dim }
     }
 
@@ -100,13 +101,12 @@ impl Mlp {
         let mut layers = Vec::with_capacity(cfg.depth);
         let mut d = in_dim;
         for l in 0..cfg.depth - 1 {
-            let layer =
-                Linear::new(params, &format!("{name}.l{l}"), group, d, cfg.width, cfg.activation, rng);
+            let layer = Linear::new(params, &format!("{name}.l{l}"), group, d, cfg.width, rng);
             layers.push(layer);
             d = cfg.width;
         }
         let last = cfg.depth - 1;
-        layers.push(Linear::new(params, &format!("{name}.l{last}"), group, d, out_dim, output, rng));
+        layers.push(Linear::new(params, &format!("{name}.l{last}"), group, d, out_dim, rng));
         Mlp { layers, hidden: cfg.activation, output }
     }
 
