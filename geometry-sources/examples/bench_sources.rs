@@ -1,8 +1,9 @@
 //! Times the expensive paths of every source on the shared test data (numbers in BENCHMARKS.md).
 //!
 //! ```sh
-//! cargo run --release -p nuvo-geometry --example bench_sources -- /work/shared/data [--repeat N]
+//! cargo run --release -p nuvo-geometry --example bench_sources -- /work/shared/data [--repeat N] [--mesh-only]
 //! ```
+//! `--mesh-only` times just the density grids' marching-cubes meshes.
 //! The data folder defaults to `$NUVO_DATA` or `<workspace>/../shared/data`. Each figure is the best
 //! of `--repeat N` runs (default 3) of wall-clock time, since the machine may be shared.
 
@@ -10,6 +11,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use nuvo_geometry::camera::{CameraOptions, CameraRig, area_radius};
+use nuvo_geometry::isosurface::{NodeGrid, marching_cubes};
+use nuvo_geometry::npy::read_npy;
 use nuvo_geometry::raycast::RayCaster;
 use nuvo_geometry::{BuildContext, GeometrySource, Similarity, SourceRegistry};
 use rand::SeedableRng;
@@ -45,19 +48,51 @@ fn bench_source(repeat: usize, label: &str, name: &str, toml_text: &str, dir: &P
     println!("{label}: {} samples (one training batch): {:.1} ms", s.len(), 1e3 * t);
 }
 
+/// Times marching cubes on the shared grids at their level 12 (on 1 and on all threads), and
+/// building the density source with and without its mesh.
+fn bench_density_mesh(repeat: usize, data: &Path) {
+    let dir = data.join("density");
+    for name in ["unruly_bunny", "unruly_vase"] {
+        let arr = read_npy(&dir.join(format!("{name}.npy"))).expect("grid reads");
+        let dims = [arr.shape[0], arr.shape[1], arr.shape[2]];
+        let grid = NodeGrid { dims, values: &arr.data, min: [-1.0; 3], max: [1.0; 3] };
+        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
+        let (t1, _) = best_of(repeat, || one.install(|| marching_cubes(&grid, 12.0)));
+        let (t, m) = best_of(repeat, || marching_cubes(&grid, 12.0));
+        println!(
+            "marching cubes {name}.npy {dims:?}: {} vertices, {} faces: {t:.3} s ({t1:.3} s on 1 thread)",
+            m.positions.len(),
+            m.triangles.len()
+        );
+        let path = format!("path = '{name}.npy'");
+        let (t_on, _) = best_of(repeat, || build("density", &path, &dir));
+        let (t_off, _) = best_of(repeat, || build("density", &format!("{path}\nextract_mesh = false"), &dir));
+        println!(
+            "density {name}.npy: build with its mesh {t_on:.3} s, with extract_mesh = false {t_off:.3} s"
+        );
+    }
+}
+
 fn main() {
     let mut args = std::env::args().skip(1);
     let mut data = nuvo_geometry::testdata::data_dir();
     let mut repeat = 3;
+    let mut mesh_only = false;
     while let Some(a) = args.next() {
         if a == "--repeat" {
             repeat = args.next().and_then(|v| v.parse().ok()).expect("--repeat N");
+        } else if a == "--mesh-only" {
+            mesh_only = true;
         } else {
             data = PathBuf::from(a);
         }
     }
     let n = 100_000;
     println!("rayon threads: {}", rayon::current_num_threads());
+    bench_density_mesh(repeat, &data);
+    if mesh_only {
+        return;
+    }
 
     let vase = data.join("meshes/unruly_vase.obj");
     let (t, mut mesh) = best_of(repeat, || nuvo_geometry::load_mesh(&vase).expect("vase loads"));

@@ -22,8 +22,16 @@
 //! threshold are kept: cameras see them, and a NeRF user would see them too (they are a few percent
 //! of the samples on the shared grids, more than 3 voxels from the extracted mesh). A threshold also
 //! makes most of space exactly empty, which the renderer skips in blocks of 8³ voxels.
+//!
+//! **Mesh.** The source also hands out a triangle mesh ([`GeometrySource::mesh`]), the surface at
+//! `mesh_level` extracted by marching cubes ([`crate::isosurface`]) from the stored values (before the
+//! haze threshold), in the same canonical frame as the samples. The outputs bake the atlas onto it
+//! when `[output] bake_mesh` is not set. It is extracted once, eagerly, when the source is built:
+//! that costs well under a second for the shared 256³ grid on 2 cores (BENCHMARKS.md), while
+//! extracting lazily, when the mesh is first asked for, would mean keeping a second copy of the grid
+//! (4 bytes a node) alive for the whole run. `extract_mesh = false` skips it.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -33,7 +41,9 @@ use serde::Deserialize;
 use crate::camera::{CameraOptions, CameraRig, Ray, bounding_radius};
 use crate::error::GeometryError;
 use crate::frame::{Aabb, Similarity};
+use crate::isosurface::{NodeGrid, marching_cubes};
 use crate::math::{V3, madd, neg, normalize, scale};
+use crate::mesh::TriMesh;
 use crate::npy::{Dtype, read_npy};
 use crate::options::{options_error, parse_options};
 use crate::registry::BuildContext;
@@ -54,6 +64,12 @@ pub const DEFAULT_SIGMA_MAX: f32 = 1600.0;
 /// mesh): a NeRF user sees that haze as a veil in renderings, not as surface.
 pub const DEFAULT_MIN_RELATIVE_DENSITY: f32 = 0.03;
 
+/// Default `mesh_level` of `uint8` grids, in stored units: the level the shared grids' meshes were
+/// extracted at (4.7% of full scale). It lies above the default haze threshold (7.65), so the mesh
+/// does not wrap haze the sampler ignores, and it is where the sampler's rays stop: with the default
+/// sigma_max the samples' median distance to the level-12 mesh is 0.46 voxels (BENCHMARKS.md).
+pub const DEFAULT_U8_MESH_LEVEL: f32 = 12.0;
+
 /// Rays cast at construction to check that the cameras see any density at all.
 const PROBE_RAYS: usize = 4096;
 
@@ -67,6 +83,10 @@ fn default_step_voxels() -> f32 {
 
 fn default_rays_per_sample() -> f32 {
     1.0
+}
+
+fn default_true() -> bool {
+    true
 }
 
 /// Options of the `density` source (the `[geometry]` table).
@@ -99,6 +119,17 @@ pub struct DensityOptions {
     /// Where rays come from; defaults: random cameras at radius 3 around the grid's box.
     #[serde(default)]
     pub cameras: Option<CameraOptions>,
+    /// The level, in stored units (before `scale`), of the surface extracted by marching cubes as
+    /// this source's mesh; values at or above it are inside. Default: 12 for `uint8` grids
+    /// ([`DEFAULT_U8_MESH_LEVEL`]); for float grids the density at which one voxel of matter absorbs
+    /// half the light, `ln 2 / voxel size` (input units) divided by `scale`. Either default is raised
+    /// to the haze threshold `min_density` (in stored units) when that is higher, so the mesh never
+    /// wraps haze the sampler treats as empty. A level that no cell of the grid straddles is an error.
+    pub mesh_level: Option<f32>,
+    /// Whether to extract that mesh when the source is built (default true). Set false to save the
+    /// time and memory when `[output] bake_mesh` names a mesh anyway, or when per-point UVs suffice.
+    #[serde(default = "default_true")]
+    pub extract_mesh: bool,
 }
 
 /// A rendered ray of the first pass: enough to re-march it identically in the second.
@@ -122,6 +153,9 @@ pub struct DensitySource {
     rays_per_sample: f32,
     /// Samples drawn at construction; used only if a batch's rays carry no weight at all.
     fallback: Vec<(V3, V3)>,
+    /// The marching-cubes mesh (canonical frame) and its level in stored units, unless
+    /// `extract_mesh = false`.
+    mesh: Option<(TriMesh, f32)>,
 }
 
 impl DensitySource {
@@ -208,6 +242,7 @@ impl DensitySource {
             step,
             rays_per_sample: opts.rays_per_sample,
             fallback: Vec::new(),
+            mesh: None,
         };
         let probe = src.render_and_resample(PROBE_RAYS, PROBE_RAYS, 0x5052_4f42);
         if probe.is_empty() {
@@ -221,6 +256,14 @@ impl DensitySource {
             ));
         }
         src.fallback = probe;
+        if opts.extract_mesh {
+            let voxel = (0..3).map(|k| (hi[k] - lo[k]) / (dims[k] - 1) as f32).fold(f32::INFINITY, f32::min);
+            let level = opts
+                .mesh_level
+                .unwrap_or_else(|| default_mesh_level(arr.dtype, voxel, scale_value, min_density));
+            let grid = NodeGrid { dims, values: &arr.data, min: cmin, max: cmax };
+            src.mesh = Some((extract_mesh(&src.path, &grid, level)?, level));
+        }
         Ok(src)
     }
 
@@ -304,6 +347,35 @@ impl DensitySource {
     }
 }
 
+/// The default `mesh_level` in stored units (see [`DensityOptions::mesh_level`]), for a grid whose
+/// smallest node spacing is `voxel` input units, with `scale` and `min_density` resolved.
+fn default_mesh_level(dtype: Dtype, voxel: f32, scale: f32, min_density: f32) -> f32 {
+    let natural = match dtype {
+        Dtype::U8 => DEFAULT_U8_MESH_LEVEL,
+        Dtype::F16 | Dtype::F32 => std::f32::consts::LN_2 / voxel / scale,
+    };
+    natural.max(min_density / scale)
+}
+
+/// The marching-cubes mesh of `grid` (stored values, canonical frame) at `level`; an error naming the
+/// values' range when the level meets no surface, since the user then gets no mesh to bake onto.
+fn extract_mesh(path: &Path, grid: &NodeGrid, level: f32) -> Result<TriMesh, GeometryError> {
+    let mesh = marching_cubes(grid, level);
+    if mesh.has_area() {
+        return Ok(mesh);
+    }
+    let lo = grid.values.iter().copied().fold(f32::INFINITY, f32::min);
+    let hi = grid.values.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+    Err(GeometryError::invalid(
+        path,
+        format!(
+            "mesh_level = {level} gives no surface to extract: the grid's values lie in [{lo}, {hi}] and no \
+             cell has values on both sides of the level; set `mesh_level` inside that range, or \
+             `extract_mesh = false` to train without the grid's own mesh"
+        ),
+    ))
+}
+
 fn check_options(opts: &DensityOptions) -> Result<(), GeometryError> {
     let bad = |m: String| options_error("density", m);
     let [lo, hi] = opts.bounds;
@@ -325,6 +397,11 @@ fn check_options(opts: &DensityOptions) -> Result<(), GeometryError> {
         && !(m >= 0.0 && m.is_finite())
     {
         return Err(bad(format!("min_density = {m} must be a finite number >= 0")));
+    }
+    if let Some(l) = opts.mesh_level
+        && !l.is_finite()
+    {
+        return Err(bad(format!("mesh_level = {l} must be a finite number")));
     }
     Ok(())
 }
@@ -360,9 +437,21 @@ impl GeometrySource for DensitySource {
         self.to_canonical
     }
 
+    fn mesh(&self) -> Option<&TriMesh> {
+        self.mesh.as_ref().map(|(m, _)| m)
+    }
+
     fn describe(&self) -> String {
+        let mesh = match &self.mesh {
+            Some((m, level)) => format!(
+                "marching-cubes mesh at level {level}: {} vertices, {} faces",
+                m.positions.len(),
+                m.triangles.len()
+            ),
+            None => "no mesh (extract_mesh = false)".to_owned(),
+        };
         format!(
-            "density {}: {:?} {:?} grid, step {:.4}, {}",
+            "density {}: {:?} {:?} grid, step {:.4}, {}, {mesh}",
             self.path.display(),
             self.dims,
             self.dtype,

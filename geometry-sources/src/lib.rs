@@ -14,7 +14,7 @@
 //! |---|---|---|
 //! | `mesh` ([`mesh_source`]) | `.obj`, `.gltf`, `.glb` | area-uniform, or first hits of camera rays |
 //! | `point_cloud` ([`point_cloud`]) | `.ply`, `.xyz` | random stored points; normals estimated if absent |
-//! | `density` ([`density`]) | `.npy` 3-D grid | volume-rendering weights along camera rays |
+//! | `density` ([`density`]) | `.npy` 3-D grid | volume-rendering weights along camera rays; its mesh by marching cubes ([`isosurface`]) |
 
 #![warn(missing_docs)]
 
@@ -25,6 +25,7 @@ pub mod error;
 pub mod frame;
 pub mod fsio;
 pub mod gltf_io;
+pub mod isosurface;
 pub mod load;
 pub(crate) mod math;
 pub mod mesh;

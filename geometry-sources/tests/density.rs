@@ -107,7 +107,11 @@ fn bad_grids_and_options_are_clear_errors() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let f32s = |v: &[f32]| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
-    let good = write_npy_bytes(&[4, 4, 4], "|u1", &[200; 64], false);
+    // 200 on the central 2^3 nodes, 0 around them: a surface for the default marching-cubes mesh.
+    let blob: Vec<u8> = (0..64)
+        .map(|i| if [i / 16, i / 4 % 4, i % 4].iter().all(|c| (1..3).contains(c)) { 200 } else { 0 })
+        .collect();
+    let good = write_npy_bytes(&[4, 4, 4], "|u1", &blob, false);
     let cases: Vec<(&str, Vec<u8>, &str)> = vec![
         ("empty.npy", vec![], "magic"),
         ("garbage.npy", b"hello, this is not numpy".to_vec(), "magic"),
@@ -152,6 +156,8 @@ fn bad_grids_and_options_are_clear_errors() {
         rays_per_sample: 1.0,
         min_density: None,
         cameras: None,
+        mesh_level: None,
+        extract_mesh: true,
     };
     assert!(DensitySource::new(&opts, &ctx(d)).is_ok());
 }

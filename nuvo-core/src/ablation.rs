@@ -242,7 +242,9 @@ pub enum VariantError {
     Train(#[from] TrainError),
     #[error(transparent)]
     Output(#[from] OutputError),
-    #[error("the geometry has no mesh to measure (set output.bake_mesh)")]
+    #[error(
+        "the geometry has no mesh to measure (set output.bake_mesh, or keep a density grid's extract_mesh on)"
+    )]
     NoMesh,
 }
 

@@ -210,7 +210,8 @@ pub struct OutputConfig {
     pub dir: PathBuf,
     /// Bake, export, draw and measure the atlas after training.
     pub bake: bool,
-    /// A mesh to bake onto when the geometry source has none (point clouds, density fields), in the
+    /// A mesh to bake onto instead of the geometry source's own (point clouds have none; density
+    /// grids have their marching-cubes mesh unless `extract_mesh = false`), in the
     /// input's own coordinates; relative to the config's folder.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub bake_mesh: Option<PathBuf>,

@@ -97,7 +97,9 @@ fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> OutputError + '_ {
     move |source| OutputError::Io { path: path.to_owned(), source }
 }
 
-/// Bakes, exports, draws and measures the trainer's atlas into `dir`.
+/// Bakes, exports, draws and measures the trainer's atlas into `dir`. The mesh is `output.bake_mesh`
+/// when set, else the source's own (a mesh file's, or a density grid's marching-cubes mesh), else
+/// there is none and per-point UVs are written instead.
 pub fn write_outputs(
     trainer: &mut Trainer,
     dir: &Path,
