@@ -17,25 +17,53 @@ pub struct Linear {
     pub out_dim: usize,
 }
 
+/// How [`Linear`] layers draw their initial weights and biases (uniform distributions).
+///
+/// `Torch` is PyTorch's `nn.Linear` default, `U(±1/√in)` for weights and biases: the scale the
+/// published Nuvo implementations start from, and the one under which the bijectivity losses learn
+/// even a flat square cleanly (BENCHMARKS.md, "Initialisation"). `He` is `U(±√(6/in))` for hidden
+/// ReLU layers and Glorot `U(±√(6/(in+out)))` for the output layer, zero biases: larger initial
+/// maps, which fold the easy cases but measured better on the full bunny objective at a five-minute
+/// budget.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Init {
+    /// PyTorch's `nn.Linear` default: weights and biases `U(±1/√in)`.
+    #[default]
+    Torch,
+    /// He-uniform hidden layers, Glorot-uniform output layer, zero biases.
+    He,
+}
+
+impl Init {
+    /// `(weight bound, bias bound)` for a layer of `in_dim → out_dim`; `output_layer` selects
+    /// Glorot over He for the last layer of an MLP.
+    pub fn bounds(self, in_dim: usize, out_dim: usize, output_layer: bool) -> (f32, f32) {
+        let fan_in = in_dim.max(1) as f32;
+        match self {
+            Init::Torch => (1.0 / fan_in.sqrt(), 1.0 / fan_in.sqrt()),
+            Init::He if output_layer => ((6.0 / (fan_in + out_dim as f32)).sqrt(), 0.0),
+            Init::He => ((6.0 / fan_in).sqrt(), 0.0),
+        }
+    }
+}
+
 impl Linear {
-    /// Registers `{name}.w` and `{name}.b` in `params` (group `group`). Weights and biases are
-    /// uniform in `±1/√in`, PyTorch's `nn.Linear` default, whatever the activation.
-    ///
-    /// Why not He (`√(6/in)`): on Nuvo's cycle losses (a flat square, 4×128 ReLU MLPs behind a
-    /// degree-4 positional encoding, 1000 steps) He-initialised networks start from maps so folded
-    /// that training never unfolds them (cycle loss 6.5e-3, 44% of the square flipped), while this
-    /// init reaches 1.0e-4 and 4% (BENCHMARKS.md, "Initialisation").
+    /// Registers `{name}.w` and `{name}.b` in `params` (group `group`), drawn uniformly within
+    /// `(weight bound, bias bound)` (see [`Init::bounds`]; a bound of 0 gives zeros).
     pub fn new(
         params: &mut ParamStore,
         name: &str,
         group: &str,
-        in_dim: usize,
-        out_dim: usize,
+        (in_dim, out_dim): (usize, usize),
+        (w_bound, b_bound): (f32, f32),
         rng: &mut impl Rng,
     ) -> Self {
-        let bound = 1.0 / (in_dim.max(1) as f32).sqrt();
-        let w: Vec<f32> = (0..in_dim * out_dim).map(|_| rng.random_range(-bound..=bound)).collect();
-        let b: Vec<f32> = (0..out_dim).map(|_| rng.random_range(-bound..=bound)).collect();
+        let mut uniform = |n: usize, bound: f32| -> Vec<f32> {
+            (0..n).map(|_| if bound > 0.0 { rng.random_range(-bound..=bound) } else { 0.0 }).collect()
+        };
+        let w = uniform(in_dim * out_dim, w_bound);
+        let b = uniform(out_dim, b_bound);
         let weight = params.add(format!("{name}.w"), group, Tensor::from_vec(in_dim, out_dim, w));
         let bias = params.add(format!("{name}.b"), group, Tensor::from_vec(1, out_dim, b));
         Linear { weight, bias, in_dim, out_dim }
@@ -68,6 +96,9 @@ pub struct MlpConfig {
     /// Hidden activation.
     #[serde(default = "default_activation")]
     pub activation: Activation,
+    /// Initialisation scheme.
+    #[serde(default)]
+    pub init: Init,
 }
 
 fn default_activation() -> Activation {
@@ -101,12 +132,14 @@ impl Mlp {
         let mut layers = Vec::with_capacity(cfg.depth);
         let mut d = in_dim;
         for l in 0..cfg.depth - 1 {
-            let layer = Linear::new(params, &format!("{name}.l{l}"), group, d, cfg.width, rng);
+            let bounds = cfg.init.bounds(d, cfg.width, false);
+            let layer = Linear::new(params, &format!("{name}.l{l}"), group, (d, cfg.width), bounds, rng);
             layers.push(layer);
             d = cfg.width;
         }
         let last = cfg.depth - 1;
-        layers.push(Linear::new(params, &format!("{name}.l{last}"), group, d, out_dim, rng));
+        let bounds = cfg.init.bounds(d, out_dim, true);
+        layers.push(Linear::new(params, &format!("{name}.l{last}"), group, (d, out_dim), bounds, rng));
         Mlp { layers, hidden: cfg.activation, output }
     }
 
@@ -148,7 +181,7 @@ mod tests {
 
     #[test]
     fn same_seed_same_weights_and_shapes_chain() {
-        let cfg = MlpConfig { depth: 4, width: 16, activation: Activation::Relu };
+        let cfg = MlpConfig { depth: 4, width: 16, activation: Activation::Relu, init: Init::Torch };
         let build = |seed| {
             let mut p = ParamStore::new();
             let mut rng = ChaCha8Rng::seed_from_u64(seed);

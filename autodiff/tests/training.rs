@@ -23,7 +23,7 @@ impl Fit {
     fn new(seed: u64) -> Self {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let mut params = ParamStore::new();
-        let cfg = MlpConfig { depth: 4, width: 64, activation: Activation::Relu };
+        let cfg = MlpConfig { depth: 4, width: 64, activation: Activation::Relu, init: Default::default() };
         let io = (nuvo_autodiff::posenc_width(2, 2), 1, Activation::Identity);
         let mlp = Mlp::new(&mut params, "f", "mlp", &cfg, io, &mut rng);
         let adam =

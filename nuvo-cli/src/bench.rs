@@ -166,7 +166,7 @@ fn mlp_case(args: &BenchArgs, depth: usize, width: usize) -> anyhow::Result<()> 
     let (in_dim, out_dim) = (27, 3);
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let mut params = ParamStore::new();
-    let cfg = MlpConfig { depth, width, activation: Activation::Relu };
+    let cfg = MlpConfig { depth, width, activation: Activation::Relu, init: Default::default() };
     let mlp = Mlp::new(&mut params, "m", "mlp", &cfg, (in_dim, out_dim, Activation::Identity), &mut rng);
     let mut adam = Adam::new(&params, AdamConfig::default(), &BTreeMap::from([("mlp".to_owned(), 1e-4)]))?;
     let x = Tensor::from_vec(

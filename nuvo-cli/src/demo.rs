@@ -27,7 +27,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     const BATCH: usize = 1024;
     let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
     let mut params = ParamStore::new();
-    let cfg = MlpConfig { depth: 4, width: 128, activation: Activation::Relu };
+    let cfg = MlpConfig { depth: 4, width: 128, activation: Activation::Relu, init: Default::default() };
     let mlp =
         Mlp::new(&mut params, "f", "mlp", &cfg, (posenc_width(2, 3), 1, Activation::Identity), &mut rng);
     let mut adam = Adam::new(&params, AdamConfig::default(), &BTreeMap::from([("mlp".to_owned(), 2e-3)]))?;

@@ -16,6 +16,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use nuvo_autodiff::Activation;
+use nuvo_autodiff::nn::Init;
 use serde::{Deserialize, Serialize};
 
 /// The whole experiment.
@@ -70,6 +71,9 @@ pub struct ModelConfig {
     pub width: usize,
     /// Hidden activation.
     pub activation: Activation,
+    /// How the MLPs start: `"torch"` (default; PyTorch's `U(±1/√in)`) or `"he"` (larger initial maps;
+    /// see BENCHMARKS.md "Initialisation" for when each measured better).
+    pub init: Init,
     /// Overrides for the chart-assignment network `c` (encoding degree 1 by default).
     pub chart: NetworkOverrides,
     /// Overrides for the texture-coordinate networks `t_i` (encoding degree 4 by default).
@@ -94,6 +98,7 @@ impl Default for ModelConfig {
             depth: 8,
             width: 256,
             activation: Activation::Relu,
+            init: Init::default(),
             chart: NetworkOverrides::default(),
             texture: NetworkOverrides::default(),
             surface: NetworkOverrides::default(),

@@ -76,7 +76,7 @@ impl NuvoModel {
                    io: (usize, usize, Activation),
                    center: f32| {
             let (depth, width, degree) = shape;
-            let mlp_cfg = MlpConfig { depth, width, activation: cfg.activation };
+            let mlp_cfg = MlpConfig { depth, width, activation: cfg.activation, init: cfg.init };
             let (inputs, outputs, act) = io;
             let mlp = Mlp::new(
                 params,
