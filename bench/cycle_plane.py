@@ -1,6 +1,6 @@
 """PyTorch reference for Nuvo's bijectivity losses on a flat square, to check the Rust trainer.
 
-Usage:  python3 bench/cycle_plane.py [--steps 1000] [--lr 3e-3] [--init torch|he|lecun]
+Usage:  python3 bench/cycle_plane.py [--steps 1000] [--lr 3e-3] [--init torch|he|lecun] [--seed 0]
 
 One chart: t: R^3 -> [0,1]^2 (sigmoid) and s: [0,1]^2 -> R^3, 4x128 ReLU MLPs behind a degree-4
 positional encoding gamma(pi*z) = [z, sin(2^k pi z), cos(2^k pi z)], k < 4 (as nuvo-core with
@@ -51,8 +51,9 @@ def main():
     ap.add_argument("--lr", type=float, default=3e-3)
     ap.add_argument("--init", choices=["torch", "he", "lecun"], default="torch")
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--seed", type=int, default=0)
     a = ap.parse_args()
-    torch.manual_seed(0)
+    torch.manual_seed(a.seed)
     torch.set_num_threads(a.threads)
     t, s = mlp(3, 2, a.init, torch.nn.Sigmoid()), mlp(2, 3, a.init)
     opt = torch.optim.Adam(list(t.parameters()) + list(s.parameters()), lr=a.lr)
