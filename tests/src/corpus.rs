@@ -8,6 +8,8 @@
 
 use std::path::{Path, PathBuf};
 
+use nuvo_geometry::npy::write_npy_bytes;
+
 /// Which reader a case exercises.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Kind {
@@ -239,27 +241,10 @@ fn garbage(n: usize, seed: u64) -> Vec<u8> {
         .collect()
 }
 
-/// A version-1.0 `.npy` header for `descr` and `shape`, followed by `data_bytes` zero bytes.
+/// A `.npy` file of `descr` and `shape` whose data are `data_bytes` zero bytes (fewer or more than
+/// the shape needs, to make truncated and absurd files).
 fn npy(descr: &str, shape: &[usize], data_bytes: usize) -> Vec<u8> {
-    let mut out = npy_header(descr, shape);
-    out.resize(out.len() + data_bytes, 0);
-    out
-}
-
-/// The bytes of a version-1.0 `.npy` header for `descr` (e.g. `<f4`) and `shape`, padded so the
-/// data starts at a multiple of 64 as NumPy writes it.
-pub fn npy_header(descr: &str, shape: &[usize]) -> Vec<u8> {
-    let dims: Vec<String> = shape.iter().map(usize::to_string).collect();
-    let mut header =
-        format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': ({},), }}", dims.join(", "));
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut out = b"\x93NUMPY\x01\x00".to_vec();
-    out.extend_from_slice(&(header.len() as u16).to_le_bytes());
-    out.extend_from_slice(header.as_bytes());
-    out
+    write_npy_bytes(shape, descr, &vec![0; data_bytes], false)
 }
 
 #[cfg(test)]

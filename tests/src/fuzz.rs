@@ -231,9 +231,8 @@ impl Rng {
 
 fn npy_seed(descr: &str, shape: &[usize], item: usize) -> Vec<u8> {
     let n: usize = shape.iter().product();
-    let mut out = crate::corpus::npy_header(descr, shape);
-    out.extend((0..n * item).map(|i| (i * 37 % 251) as u8));
-    out
+    let data: Vec<u8> = (0..n * item).map(|i| (i * 37 % 251) as u8).collect();
+    nuvo_geometry::npy::write_npy_bytes(shape, descr, &data, false)
 }
 
 fn ply_binary_seed() -> Vec<u8> {
