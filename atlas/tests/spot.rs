@@ -5,25 +5,14 @@
 //! the 10th–90th percentiles of s/median(s) are 0.47–7.4), Conformal ≈ 0.89, 13 UV charts, one of
 //! them (176 faces) mirrored as a whole, and exactly one face flipped inside its chart.
 
-use std::path::PathBuf;
-
 use nuvo_atlas::export::{GlbOptions, glb_bytes, write_obj};
 use nuvo_atlas::load::load_mesh_with_uv;
 use nuvo_atlas::metrics::{EvalOptions, evaluate};
+use nuvo_geometry::testdata::data_file;
 use nuvo_geometry::{Similarity, TriMesh};
 
-/// `$NUVO_DATA`, else `<workspace>/../shared/data`; missing data fails the test.
-fn data(rel: &str) -> PathBuf {
-    let root = std::env::var_os("NUVO_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data"));
-    let p = root.join(rel);
-    assert!(p.is_file(), "test data {} is missing: set NUVO_DATA to the shared data folder", p.display());
-    p
-}
-
 fn spot() -> TriMesh {
-    load_mesh_with_uv(&data("meshes/spot.obj")).expect("spot.obj loads with UVs")
+    load_mesh_with_uv(&data_file("meshes/spot.obj")).expect("spot.obj loads with UVs")
 }
 
 #[test]

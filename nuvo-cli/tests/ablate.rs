@@ -3,14 +3,12 @@
 //! that `--resume` reuses finished variants.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
-fn nuvo() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_nuvo"))
-}
+mod common;
+use common::{nuvo, repo, run};
 
 fn sweep_config(dir: &Path) -> PathBuf {
-    let bunny = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/stanford-bunny.obj");
+    let bunny = repo().join("assets/stanford-bunny.obj");
     let text = format!(
         r#"seed = 1
 [geometry]
@@ -47,16 +45,6 @@ set = ["model.charts=0"]
     let p = dir.join("sweep.toml");
     std::fs::write(&p, text).unwrap();
     p
-}
-
-fn run(cmd: &mut Command) -> Output {
-    let out = cmd.output().expect("nuvo runs");
-    eprintln!(
-        "stdout:\n{}\nstderr:\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
 }
 
 #[test]

@@ -1,20 +1,11 @@
 //! `nuvo eval` as a process: exit codes and messages on good and bad input.
 
-use std::path::PathBuf;
 use std::process::{Command, Output};
+
+use nuvo_geometry::testdata::data_file;
 
 fn nuvo(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_nuvo")).args(args).output().expect("the nuvo binary runs")
-}
-
-/// `$NUVO_DATA`, else `<workspace>/../shared/data`; missing data fails the test.
-fn data(rel: &str) -> PathBuf {
-    let root = std::env::var_os("NUVO_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data"));
-    let p = root.join(rel);
-    assert!(p.is_file(), "test data {} is missing: set NUVO_DATA to the shared data folder", p.display());
-    p
 }
 
 fn stderr(o: &Output) -> String {
@@ -30,7 +21,7 @@ fn a_missing_file_fails_naming_it() {
 
 #[test]
 fn a_mesh_without_uvs_fails_naming_it() {
-    let p = data("meshes/stanford-bunny.obj");
+    let p = data_file("meshes/stanford-bunny.obj");
     let o = nuvo(&["eval", p.to_str().unwrap()]);
     assert!(!o.status.success());
     let e = stderr(&o);
@@ -54,7 +45,7 @@ fn garbage_and_unknown_formats_fail_naming_the_file() {
 
 #[test]
 fn bad_options_fail_without_panicking() {
-    let p = data("meshes/spot.obj");
+    let p = data_file("meshes/spot.obj");
     let o = nuvo(&["eval", p.to_str().unwrap(), "--views", "0"]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("views") && !stderr(&o).contains("panicked"), "{}", stderr(&o));
@@ -64,7 +55,7 @@ fn bad_options_fail_without_panicking() {
 
 #[test]
 fn spot_gives_a_table_and_json_and_pictures() {
-    let p = data("meshes/spot.obj");
+    let p = data_file("meshes/spot.obj");
     let o = nuvo(&["eval", p.to_str().unwrap(), "--views", "3", "--resolution", "200"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let table = String::from_utf8(o.stdout).unwrap();
