@@ -3,19 +3,18 @@
 //! no output left looking complete.
 
 use std::path::Path;
-use std::process::{Command, Stdio};
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use nuvo_tests::corpus::{self, Case, Kind};
 
+mod common;
+use common::nuvo;
+
 /// Runs `nuvo args...`, killing it after `limit`; returns (exit code, stderr).
 fn run_limited(args: &[&std::ffi::OsStr], limit: Duration) -> (Option<i32>, String) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_nuvo"))
-        .args(args)
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("nuvo starts");
+    let mut child =
+        nuvo().args(args).stdout(Stdio::null()).stderr(Stdio::piped()).spawn().expect("nuvo starts");
     let started = Instant::now();
     loop {
         if let Some(status) = child.try_wait().unwrap() {
