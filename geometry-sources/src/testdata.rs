@@ -1,10 +1,67 @@
-//! Locating the shared test data (`shared/data/` beside the workspace), for tests and benchmarks.
+//! Locating the shared test data (`shared/data/` beside the workspace), for tests and benchmarks,
+//! and an analytic test source (the unit sphere) for trainer tests in other crates.
 //!
 //! Not part of the API: it lives in the crate only so unit tests, integration tests and examples
 //! share one rule. A test that needs the data and cannot find it **fails** with a message saying where
 //! it looked; it never skips.
 
 use std::path::PathBuf;
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::{Aabb, BuildContext, GeometryError, GeometrySource, Similarity, SourceRegistry, SurfaceSamples};
+
+/// Uniform samples on the unit sphere (canonical frame), normals pointing out.
+pub struct UnitSphere;
+
+impl GeometrySource for UnitSphere {
+    fn kind(&self) -> &str {
+        "sphere"
+    }
+    fn sample(&self, n: usize, seed: u64) -> SurfaceSamples {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let positions: Vec<[f32; 3]> = (0..n)
+            .map(|_| {
+                let z: f32 = rng.random_range(-1.0..1.0);
+                let a: f32 = rng.random_range(0.0..std::f32::consts::TAU);
+                let r = (1.0 - z * z).sqrt();
+                [r * a.cos(), r * a.sin(), z]
+            })
+            .collect();
+        SurfaceSamples { normals: positions.clone(), positions }
+    }
+    fn bounds(&self) -> Aabb {
+        Aabb { min: [-1.0; 3], max: [1.0; 3] }
+    }
+    fn to_canonical(&self) -> Similarity {
+        Similarity::IDENTITY
+    }
+    fn describe(&self) -> String {
+        "unit sphere".into()
+    }
+}
+
+/// Builds [`UnitSphere`]; it has no options, so any key is an error.
+fn build_unit_sphere(
+    options: &toml::Table,
+    _: &BuildContext,
+) -> Result<Box<dyn GeometrySource>, GeometryError> {
+    match options.keys().next() {
+        None => Ok(Box::new(UnitSphere)),
+        Some(k) => Err(GeometryError::Options {
+            source_name: "sphere".into(),
+            message: format!("unknown field `{k}`, expected nothing"),
+        }),
+    }
+}
+
+/// A registry with just [`UnitSphere`], as `source = "sphere"`.
+pub fn sphere_sources() -> SourceRegistry {
+    let mut r = SourceRegistry::new();
+    r.register("sphere", "unit sphere (tests)", build_unit_sphere);
+    r
+}
 
 /// `$NUVO_DATA` if set, else `<workspace root>/../shared/data`.
 pub fn data_dir() -> PathBuf {

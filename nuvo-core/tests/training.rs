@@ -6,58 +6,9 @@ use nuvo_autodiff::{Shape, Var};
 use nuvo_core::config::{self, LoadedConfig};
 use nuvo_core::run::{RunOptions, Silent, files, run};
 use nuvo_core::{Checkpoint, TrainError, Trainer};
-use nuvo_geometry::{
-    Aabb, BuildContext, GeometryError, GeometrySource, Similarity, SourceRegistry, SurfaceSamples,
-};
+use nuvo_geometry::SourceRegistry;
+use nuvo_geometry::testdata::sphere_sources as sources;
 use nuvo_losses::{Loss, LossError, LossInfo, LossRegistry, StepContext};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
-
-/// Uniform samples on the unit sphere (canonical frame), normals pointing out.
-struct Sphere;
-
-impl GeometrySource for Sphere {
-    fn kind(&self) -> &str {
-        "sphere"
-    }
-    fn sample(&self, n: usize, seed: u64) -> SurfaceSamples {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let positions: Vec<[f32; 3]> = (0..n)
-            .map(|_| {
-                let z: f32 = rng.random_range(-1.0..1.0);
-                let a: f32 = rng.random_range(0.0..std::f32::consts::TAU);
-                let r = (1.0 - z * z).sqrt();
-                [r * a.cos(), r * a.sin(), z]
-            })
-            .collect();
-        SurfaceSamples { normals: positions.clone(), positions }
-    }
-    fn bounds(&self) -> Aabb {
-        Aabb { min: [-1.0; 3], max: [1.0; 3] }
-    }
-    fn to_canonical(&self) -> Similarity {
-        Similarity::IDENTITY
-    }
-    fn describe(&self) -> String {
-        "unit sphere".into()
-    }
-}
-
-fn sphere(options: &toml::Table, _: &BuildContext) -> Result<Box<dyn GeometrySource>, GeometryError> {
-    match options.keys().next() {
-        None => Ok(Box::new(Sphere)),
-        Some(k) => Err(GeometryError::Options {
-            source_name: "sphere".into(),
-            message: format!("unknown field `{k}`, expected nothing"),
-        }),
-    }
-}
-
-fn sources() -> SourceRegistry {
-    let mut r = SourceRegistry::new();
-    r.register("sphere", "unit sphere (tests)", sphere);
-    r
-}
 
 const SMALL: &str = r#"
 seed = 7

@@ -11,12 +11,6 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
 
-use nuvo_geometry::{
-    Aabb, BuildContext, GeometryError, GeometrySource, Similarity, SourceRegistry, SurfaceSamples,
-};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
-
 /// The shared libraries of the example and fixture plugins, by target name (`symmetric_dirichlet`,
 /// `misbehaving`, `raw_abi`, `future_abi`, `no_entry`).
 pub struct Plugins {
@@ -71,46 +65,7 @@ fn cdylib_artifact(line: &str) -> Option<(String, PathBuf)> {
     Some((target["name"].as_str()?.to_owned(), PathBuf::from(file)))
 }
 
-/// Uniform samples on the unit sphere (canonical frame), normals pointing out.
-pub struct Sphere;
-
-impl GeometrySource for Sphere {
-    fn kind(&self) -> &str {
-        "sphere"
-    }
-    fn sample(&self, n: usize, seed: u64) -> SurfaceSamples {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let positions: Vec<[f32; 3]> = (0..n)
-            .map(|_| {
-                let z: f32 = rng.random_range(-1.0..1.0);
-                let a: f32 = rng.random_range(0.0..std::f32::consts::TAU);
-                let r = (1.0 - z * z).sqrt();
-                [r * a.cos(), r * a.sin(), z]
-            })
-            .collect();
-        SurfaceSamples { normals: positions.clone(), positions }
-    }
-    fn bounds(&self) -> Aabb {
-        Aabb { min: [-1.0; 3], max: [1.0; 3] }
-    }
-    fn to_canonical(&self) -> Similarity {
-        Similarity::IDENTITY
-    }
-    fn describe(&self) -> String {
-        "unit sphere".into()
-    }
-}
-
-fn sphere(_: &toml::Table, _: &BuildContext) -> Result<Box<dyn GeometrySource>, GeometryError> {
-    Ok(Box::new(Sphere))
-}
-
-/// A registry with just the sphere, as `source = "sphere"`.
-pub fn sources() -> SourceRegistry {
-    let mut r = SourceRegistry::new();
-    r.register("sphere", "unit sphere (tests)", sphere);
-    r
-}
+pub use nuvo_geometry::testdata::sphere_sources as sources;
 
 /// A small, fast experiment on the sphere; append `[losses.*]` tables to it.
 pub const SMALL: &str = r#"
