@@ -175,16 +175,7 @@ pub(crate) fn column_sums(
         }
         acc
     };
-    let blocks = rows.div_ceil(REDUCE_BLOCK_ROWS);
-    let partials: Vec<Vec<f64>> = if rows * cols >= PAR_MIN_LEN {
-        (0..blocks).into_par_iter().map(block).collect()
-    } else {
-        (0..blocks).map(block).collect()
-    };
-    for (c, d) in dst.iter_mut().enumerate() {
-        let s: f64 = partials.iter().map(|p| p[c]).sum();
-        *d = if accumulate { *d + s as f32 } else { s as f32 };
-    }
+    combine_column_blocks(dst, rows, accumulate, block);
 }
 
 /// Per-column sums of a dense row-major `rows × cols` matrix `data`: the fast path of
@@ -200,8 +191,20 @@ pub(crate) fn column_sums_dense(dst: &mut [f32], data: &[f32], cols: usize, accu
         }
         acc
     };
+    combine_column_blocks(dst, rows, accumulate, block);
+}
+
+/// The shared half of the column sums: runs `block(b)` (the f64 column sums of rows
+/// `b·REDUCE_BLOCK_ROWS ..`) for every block, in parallel when large, and adds the blocks in a fixed
+/// order into `dst`, so the result does not depend on the thread count.
+fn combine_column_blocks(
+    dst: &mut [f32],
+    rows: usize,
+    accumulate: bool,
+    block: impl Fn(usize) -> Vec<f64> + Sync + Send,
+) {
     let blocks = rows.div_ceil(REDUCE_BLOCK_ROWS);
-    let partials: Vec<Vec<f64>> = if rows * cols >= PAR_MIN_LEN {
+    let partials: Vec<Vec<f64>> = if rows * dst.len() >= PAR_MIN_LEN {
         (0..blocks).into_par_iter().map(block).collect()
     } else {
         (0..blocks).map(block).collect()
