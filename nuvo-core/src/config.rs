@@ -37,6 +37,10 @@ pub struct ExperimentConfig {
     /// Adam and its schedule.
     #[serde(default)]
     pub optimizer: OptimizerConfig,
+    /// `[warm_start]`: the optional projection prior of the first steps (off by default; not in
+    /// the paper). See [`crate::warm_start`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub warm_start: Option<crate::warm_start::WarmStartConfig>,
     /// The loss terms, one table each. Absent: every built-in loss at its paper weight. Present:
     /// exactly the listed terms (removing an entry, or a weight of 0, is an ablation).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -581,6 +585,17 @@ impl ExperimentConfig {
         }
         if !(0.0..=1.0).contains(&o.final_lr_factor) {
             return Err(src.invalid("optimizer.final_lr_factor", "must be in [0, 1]"));
+        }
+        if let Some(w) = &self.warm_start {
+            if !(w.weight.is_finite() && w.weight >= 0.0) {
+                return Err(src.invalid("warm_start.weight", "must be a non-negative number"));
+            }
+            if !(-1.0 < w.min_alignment && w.min_alignment < 1.0) {
+                return Err(src.invalid("warm_start.min_alignment", "must be in (-1, 1): a cosine"));
+            }
+            if w.enabled() && w.samples < self.model.charts {
+                return Err(src.invalid("warm_start.samples", "needs at least one sample per chart"));
+            }
         }
         let out = &self.output;
         if !(16..=16384).contains(&out.atlas_resolution) {

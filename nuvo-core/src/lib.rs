@@ -5,7 +5,8 @@
 //! - [`trainer`]: one deterministic optimisation step at a time;
 //! - [`run`]: the output folder, checkpoints, log, resume, budget and NaN rollback;
 //! - [`checkpoint`]: the safetensors checkpoint format;
-//! - [`ablation`]: sweeps of config variants and the paper's ablation table.
+//! - [`ablation`]: sweeps of config variants and the paper's ablation table;
+//! - [`warm_start`]: the optional projection prior that starts charts as fold-free projections.
 //!
 //! Geometry sources and losses come from registries ([`nuvo_geometry::SourceRegistry`],
 //! [`nuvo_losses::LossRegistry`]), so an application can add its own before building a [`Trainer`].
@@ -19,6 +20,7 @@ pub mod outputs;
 pub mod run;
 pub mod seeds;
 pub mod trainer;
+pub mod warm_start;
 
 pub use checkpoint::{Checkpoint, CheckpointError};
 pub use config::{ConfigError, ExperimentConfig, LoadedConfig};

@@ -15,6 +15,8 @@ pub enum Stream {
     Tangents = 3,
     /// Network initialisation (step is ignored).
     Init = 4,
+    /// The warm-start prior's one-off sample of the scene (step is ignored).
+    WarmStart = 5,
 }
 
 fn splitmix64(mut z: u64) -> u64 {

@@ -17,6 +17,7 @@ use crate::checkpoint::{Checkpoint, CheckpointError};
 use crate::config::{ConfigError, ExperimentConfig, LoadedConfig};
 use crate::model::{MODEL_FRAME_SCALE, NuvoModel, groups};
 use crate::seeds::{Stream, derive};
+use crate::warm_start::{ProjectionPrior, WarmStartConfig};
 
 /// Anything that stops training.
 #[derive(Debug, thiserror::Error)]
@@ -101,7 +102,12 @@ pub struct Trainer {
     step: u64,
     lr_scale: f32,
     batch: StepBatch,
+    /// The projection prior and its schedule, when `[warm_start]` is enabled.
+    warm_start: Option<(ProjectionPrior, WarmStartConfig)>,
 }
+
+/// The name the warm-start prior's value is logged under.
+pub const WARM_START_TERM: &str = "warm_start";
 
 impl Trainer {
     /// Builds everything a config describes: the geometry source and losses come from the
@@ -132,6 +138,7 @@ impl Trainer {
                 }
             })?;
         let terms = build_terms(&config, loaded, losses)?;
+        let warm_start = fit_warm_start(&config, &*source)?;
         let mut params = ParamStore::new();
         let model = NuvoModel::new(&config.model, &mut params, derive(config.seed, 0, Stream::Init));
         let o = &config.optimizer;
@@ -158,6 +165,7 @@ impl Trainer {
             step: 0,
             lr_scale: 1.0,
             batch: StepBatch::default(),
+            warm_start,
         })
     }
 
@@ -179,6 +187,11 @@ impl Trainer {
     /// The parameters.
     pub fn params(&self) -> &ParamStore {
         self.tape.params()
+    }
+
+    /// The projection prior of `[warm_start]`, when enabled.
+    pub fn warm_start(&self) -> Option<&ProjectionPrior> {
+        self.warm_start.as_ref().map(|(prior, _)| prior)
     }
 
     /// The enabled terms.
@@ -252,6 +265,18 @@ impl Trainer {
             let v = term.loss.evaluate(&mut ctx)?;
             values.push((term.name.clone(), ctx.tape.scalar(v)));
             let w = ctx.tape.scale(v, term.weight_at(self.step));
+            total = Some(match total {
+                None => w,
+                Some(t) => ctx.tape.add(t, w),
+            });
+        }
+        if let Some((prior, cfg)) = &self.warm_start
+            && only.is_none()
+            && cfg.weight_at(self.step) > 0.0
+        {
+            let v = prior.evaluate(&mut ctx);
+            values.push((WARM_START_TERM.to_owned(), ctx.tape.scalar(v)));
+            let w = ctx.tape.scale(v, cfg.weight_at(self.step));
             total = Some(match total {
                 None => w,
                 Some(t) => ctx.tape.add(t, w),
@@ -360,6 +385,29 @@ impl Trainer {
         self.lr_scale = ckpt.lr_scale;
         Ok(())
     }
+}
+
+/// Fits the projection prior to a sample of the scene drawn from the run's own seed, so a resumed
+/// run fits the same one.
+fn fit_warm_start(
+    config: &ExperimentConfig,
+    source: &dyn GeometrySource,
+) -> Result<Option<(ProjectionPrior, WarmStartConfig)>, TrainError> {
+    let Some(cfg) = config.warm_start.clone().filter(WarmStartConfig::enabled) else {
+        return Ok(None);
+    };
+    let samples = source.sample(cfg.samples, derive(config.seed, 0, Stream::WarmStart));
+    if samples.len() != cfg.samples || samples.normals.len() != cfg.samples {
+        return Err(ShortBatch {
+            source_kind: source.kind().to_owned(),
+            got: samples.len(),
+            wanted: cfg.samples,
+        }
+        .into());
+    }
+    let points: Vec<[f32; 3]> = samples.positions.iter().map(|p| p.map(|c| c * MODEL_FRAME_SCALE)).collect();
+    let prior = ProjectionPrior::fit(&points, &samples.normals, config.model.charts, cfg.min_alignment);
+    Ok(Some((prior, cfg)))
 }
 
 fn grads_finite(p: &ParamStore) -> bool {

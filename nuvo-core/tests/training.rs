@@ -353,3 +353,70 @@ fn the_bijectivity_losses_learn_a_flat_square_from_the_default_init() {
     assert!(torch < 8e-3, "cycle residual with the default init: {torch}");
     assert!(he > 3.0 * torch, "he {he} vs torch {torch}: the option does not change the init");
 }
+
+/// Share of sphere points whose most likely chart is the one the projection prior assigns, and the
+/// mean squared distance of that chart's UV to the prior's target, after `steps` steps.
+fn agreement_with_the_projection_prior(warm_start: &str, steps: usize) -> (f32, f32) {
+    let six_charts = |extra: &str| {
+        let mut cfg = small(extra);
+        cfg.config.model.charts = 6;
+        cfg.config.optimizer.lr_mlp = 3e-3;
+        trainer(&cfg)
+    };
+    // The same seed fits the same prior, so this one shows what the trained runs were pulled to.
+    let reference = six_charts("[warm_start]\nsteps = 1\n");
+    let prior = reference.warm_start().expect("warm start enabled").clone();
+    let mut t = six_charts(&format!("[losses.cycle_3d]\n{warm_start}"));
+    for _ in 0..steps {
+        t.step().unwrap();
+    }
+    let pts: Vec<[f32; 3]> = (0..400)
+        .map(|k| {
+            // A Fibonacci sphere: well-spread unit points (their own normals).
+            let z = 1.0 - 2.0 * (k as f32 + 0.5) / 400.0;
+            let r = (1.0 - z * z).sqrt();
+            let a = k as f32 * 2.399_963;
+            [r * a.cos(), r * a.sin(), z]
+        })
+        .collect();
+    let (probs, uvs) = t.evaluate_atlas(&pts);
+    let (mut agree, mut err) = (0usize, 0.0f32);
+    for (k, p) in pts.iter().enumerate() {
+        let row = &probs[k * 6..k * 6 + 6];
+        let best = (0..6).max_by(|&a, &b| row[a].total_cmp(&row[b])).unwrap();
+        let label = prior.label(p);
+        agree += usize::from(best == label);
+        let target = prior.target_uv(label, &p.map(|c| c * 0.5));
+        let uv = &uvs[(k * 6 + label) * 2..(k * 6 + label) * 2 + 2];
+        err += (uv[0] - target[0]).powi(2) + (uv[1] - target[1]).powi(2);
+    }
+    (agree as f32 / pts.len() as f32, err / pts.len() as f32)
+}
+
+#[test]
+fn the_warm_start_starts_charts_as_the_projections_of_the_faces_they_look_at() {
+    let (agree, err) = agreement_with_the_projection_prior("[warm_start]\nsteps = 1000\n", 150);
+    let (agree_cold, err_cold) = agreement_with_the_projection_prior("", 150);
+    assert!(agree > 0.8 && err < 5e-3, "with the prior: agreement {agree}, UV error {err}");
+    assert!(agree_cold < 0.6 && err_cold > 5.0 * err, "without: agreement {agree_cold}, UV error {err_cold}");
+}
+
+#[test]
+fn the_warm_start_term_is_logged_while_it_fades_and_then_leaves_the_objective() {
+    let mut t = trainer(&small("[warm_start]\nsteps = 3\n"));
+    let names = |o: &nuvo_core::StepOutcome| o.terms.iter().any(|(n, _)| n == "warm_start");
+    let seen: Vec<bool> = (0..5).map(|_| names(&t.step().unwrap())).collect();
+    assert_eq!(seen, [true, true, true, false, false]);
+}
+
+#[test]
+fn warm_start_mistakes_are_located() {
+    for (text, key) in [
+        ("[warm_start]\nmin_alignment = 1.5\n", "warm_start.min_alignment"),
+        ("[warm_start]\nweight = -1\n", "warm_start.weight"),
+        ("[warm_start]\nstep = 3\n", "warm_start.step"),
+    ] {
+        let err = config::from_str("w.toml", &format!("{SMALL}{text}")).unwrap_err().to_string();
+        assert!(err.contains(key), "{err}");
+    }
+}

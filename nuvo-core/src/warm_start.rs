@@ -1,0 +1,355 @@
+//! The projection warm start: an optional prior that starts every chart as an orthographic
+//! projection of the part of the surface that faces it, then fades out.
+//!
+//! **Why.** From a random initialisation the cycle losses often settle on folded maps they never
+//! unfold (BENCHMARKS.md, "Initialisation"), and in a short budget the charts end up as overlapping
+//! projections. A projection of the surface along a direction `a` is fold-free wherever the normal
+//! faces `a`, and a cube map of the bunny (6 such charts, no training) already scores Stretch 0.90
+//! and Conformal 0.93. So for the first `warm_start.steps` steps the objective gets one extra term:
+//!
+//! `L_warm = −(1/|G|) Σ_x log c(x)[ℓ(x)] + (1/|G|) Σ_x Σ_i m_i(x) ‖t_i(x) − P_i(x)‖²`
+//!
+//! where `a_i` are the chart axes (spherical k-means of the surface normals, started from the
+//! principal axes of the point cloud), `ℓ(x) = argmax_i n(x)·a_i`, `m_i(x) = [n(x)·a_i > τ]`
+//! (`τ = warm_start.min_alignment`) and `P_i` projects onto the plane orthogonal to `a_i`, scaled
+//! uniformly (conformal) so the aligned part of the surface fills the middle 90% of the square.
+//! Its weight falls linearly from `warm_start.weight` to 0, while every configured loss runs as
+//! usual (the cycle losses teach `s_i` to invert the projection). Not in the paper: it is off
+//! unless a config has a `[warm_start]` table with `steps > 0`.
+//!
+//! **Determinism.** The axes and frames are a pure function of the source's samples for the run's
+//! seed, recomputed identically on resume, so no state needs checkpointing.
+
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+use nuvo_autodiff::{Tensor, Var};
+use nuvo_losses::StepContext;
+use serde::{Deserialize, Serialize};
+
+/// `[warm_start]`: the projection prior (see the module docs). Absent or `steps = 0`: off.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct WarmStartConfig {
+    /// Steps over which the prior's weight falls linearly to 0 (0: no warm start).
+    pub steps: u64,
+    /// The prior's weight at step 0.
+    pub weight: f32,
+    /// `t_i` is pulled towards its projection only where `n(x)·a_i` exceeds this (in `(-1, 1)`):
+    /// below it the projection foreshortens too much, and past 0 it folds.
+    pub min_alignment: f32,
+    /// Surface samples drawn once to fit the axes and the projections' extents.
+    pub samples: usize,
+}
+
+impl Default for WarmStartConfig {
+    fn default() -> Self {
+        WarmStartConfig { steps: 0, weight: 10.0, min_alignment: 0.3, samples: 20_000 }
+    }
+}
+
+impl WarmStartConfig {
+    /// Whether the warm start runs at all.
+    pub fn enabled(&self) -> bool {
+        self.steps > 0
+    }
+
+    /// The prior's weight at 0-based `step`: `weight · (1 − step / steps)`, 0 from `steps` on.
+    pub fn weight_at(&self, step: u64) -> f32 {
+        if step >= self.steps { 0.0 } else { self.weight * (1.0 - step as f32 / self.steps as f32) }
+    }
+}
+
+/// One chart's projection: UV = `origin + scale · (x·e1, x·e2)`, with `e1 × e2 = axis`.
+#[derive(Clone, Debug, PartialEq)]
+struct ChartFrame {
+    axis: [f32; 3],
+    e1: [f32; 3],
+    e2: [f32; 3],
+    origin: [f32; 2],
+    scale: f32,
+}
+
+impl ChartFrame {
+    /// A frame for `axis` with unit scale and no offset.
+    fn new(axis: [f32; 3]) -> Self {
+        let a = Vector3::from(axis);
+        // The coordinate axis least aligned with `a` gives a well-conditioned first tangent.
+        let k = (0..3).min_by(|&i, &j| a[i].abs().total_cmp(&a[j].abs())).unwrap_or(0);
+        let e1 = a.cross(&Vector3::ith(k, 1.0)).normalize();
+        let e2 = a.cross(&e1);
+        ChartFrame { axis, e1: e1.into(), e2: e2.into(), origin: [0.0; 2], scale: 1.0 }
+    }
+
+    fn project(&self, x: &[f32; 3]) -> [f32; 2] {
+        [self.origin[0] + self.scale * dot(x, &self.e1), self.origin[1] + self.scale * dot(x, &self.e2)]
+    }
+
+    /// Scales and offsets the projection so the points it supervises fill the middle 90% of the
+    /// square (keeping the aspect ratio). Leaves the frame alone when there are none.
+    fn fit_extent<'a>(&mut self, points: impl Iterator<Item = &'a [f32; 3]>) {
+        let (mut lo, mut hi) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
+        for p in points {
+            let q = [dot(p, &self.e1), dot(p, &self.e2)];
+            for k in 0..2 {
+                lo[k] = lo[k].min(q[k]);
+                hi[k] = hi[k].max(q[k]);
+            }
+        }
+        let extent = (hi[0] - lo[0]).max(hi[1] - lo[1]);
+        if !(extent.is_finite() && extent > 0.0) {
+            return;
+        }
+        self.scale = 0.9 / extent;
+        for k in 0..2 {
+            self.origin[k] = 0.5 - self.scale * 0.5 * (lo[k] + hi[k]);
+        }
+    }
+}
+
+fn dot(a: &[f32; 3], b: &[f32; 3]) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// The fitted prior: one projection per chart.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ProjectionPrior {
+    frames: Vec<ChartFrame>,
+    min_alignment: f32,
+}
+
+/// Rounds of spherical k-means that adapt the starting axes to the normals.
+const KMEANS_ROUNDS: usize = 10;
+
+impl ProjectionPrior {
+    /// Fits `charts` projections to surface samples (model frame) and their unit normals.
+    /// Deterministic; `points` and `normals` must have equal lengths.
+    pub fn fit(points: &[[f32; 3]], normals: &[[f32; 3]], charts: usize, min_alignment: f32) -> Self {
+        debug_assert_eq!(points.len(), normals.len());
+        let mut axes = starting_axes(points, normals, charts);
+        for _ in 0..KMEANS_ROUNDS {
+            let mut sums = vec![Vector3::<f32>::zeros(); charts];
+            for n in normals {
+                sums[best_axis(&axes, n)] += Vector3::from(*n);
+            }
+            for (axis, sum) in axes.iter_mut().zip(&sums) {
+                if sum.norm() > 0.0 {
+                    *axis = sum.normalize().into();
+                }
+            }
+        }
+        let frames = axes
+            .iter()
+            .map(|&axis| {
+                let mut frame = ChartFrame::new(axis);
+                let aligned = points.iter().zip(normals).filter(|(_, n)| dot(n, &axis) > min_alignment);
+                frame.fit_extent(aligned.map(|(p, _)| p));
+                frame
+            })
+            .collect();
+        ProjectionPrior { frames, min_alignment }
+    }
+
+    /// The charts' axes (unit vectors).
+    pub fn axes(&self) -> Vec<[f32; 3]> {
+        self.frames.iter().map(|f| f.axis).collect()
+    }
+
+    /// The chart a point with normal `n` starts in: the one whose axis it faces most.
+    pub fn label(&self, n: &[f32; 3]) -> usize {
+        best_axis(&self.axes(), n)
+    }
+
+    /// Chart `i`'s target UV for point `x`.
+    pub fn target_uv(&self, i: usize, x: &[f32; 3]) -> [f32; 2] {
+        self.frames[i].project(x)
+    }
+
+    /// Records `L_warm` (module docs) for the step's batch on the context's tape, reusing its
+    /// shared chart logits and texture coordinates.
+    pub fn evaluate(&self, ctx: &mut StepContext<'_>) -> Var {
+        let n = self.frames.len();
+        let (points, normals) = (ctx.data().points, ctx.data().normals);
+        let b = points.len();
+        let mut one_hot = Tensor::zeros(b, n);
+        let mut targets: Vec<Tensor> = (0..n).map(|_| Tensor::zeros(b, 2)).collect();
+        let mut masks: Vec<Tensor> = (0..n).map(|_| Tensor::zeros(b, 1)).collect();
+        let axes = self.axes();
+        for (r, (x, nx)) in points.iter().zip(normals).enumerate() {
+            one_hot.data_mut()[r * n + best_axis(&axes, nx)] = 1.0;
+            for (i, frame) in self.frames.iter().enumerate() {
+                if dot(nx, &frame.axis) > self.min_alignment {
+                    masks[i].data_mut()[r] = 1.0;
+                    let uv = frame.project(x);
+                    targets[i].data_mut()[2 * r..2 * r + 2].copy_from_slice(&uv);
+                }
+            }
+        }
+        let logits = ctx.chart_logits();
+        let mut per_chart = Vec::with_capacity(n);
+        for i in 0..n {
+            let t = ctx.tex(i);
+            let tape = &mut *ctx.tape;
+            let target = tape.input(&targets[i]);
+            let d = tape.sub(t, target);
+            let sq = tape.square(d);
+            let dist = tape.sum_each_row(sq);
+            let mask = tape.input(&masks[i]);
+            per_chart.push(tape.mul(dist, mask));
+        }
+        let tape = &mut *ctx.tape;
+        let log_p = tape.log_softmax(logits);
+        let one_hot = tape.input(&one_hot);
+        let picked = tape.mul(log_p, one_hot);
+        let ce = tape.sum_all(picked);
+        let ce = tape.scale(ce, -1.0);
+        let fit = if n == 1 { per_chart[0] } else { tape.concat_cols(&per_chart) };
+        let fit = tape.sum_all(fit);
+        let total = tape.add(ce, fit);
+        tape.scale(total, 1.0 / b.max(1) as f32)
+    }
+}
+
+fn best_axis(axes: &[[f32; 3]], n: &[f32; 3]) -> usize {
+    (0..axes.len()).max_by(|&i, &j| dot(n, &axes[i]).total_cmp(&dot(n, &axes[j]))).unwrap_or(0)
+}
+
+/// The first axes: `±` the principal directions of the points, thinnest first (so two charts
+/// split the object into its two broad sides), then normals farthest from every axis so far.
+fn starting_axes(points: &[[f32; 3]], normals: &[[f32; 3]], charts: usize) -> Vec<[f32; 3]> {
+    let mut axes: Vec<[f32; 3]> = Vec::with_capacity(charts);
+    for dir in principal_directions(points) {
+        for sign in [1.0, -1.0] {
+            if axes.len() < charts {
+                axes.push((dir * sign).into());
+            }
+        }
+    }
+    while axes.len() < charts {
+        let far = normals.iter().min_by(|a, b| {
+            let closeness = |n: &[f32; 3]| axes.iter().map(|ax| dot(n, ax)).fold(f32::NEG_INFINITY, f32::max);
+            closeness(a).total_cmp(&closeness(b))
+        });
+        match far {
+            Some(n) => axes.push(*n),
+            None => axes.push([0.0, 0.0, 1.0]),
+        }
+    }
+    axes
+}
+
+/// Eigenvectors of the points' covariance, smallest variance first (the coordinate axes when
+/// there are no points).
+fn principal_directions(points: &[[f32; 3]]) -> [Vector3<f32>; 3] {
+    let count = points.len().max(1) as f64;
+    let mean =
+        points.iter().fold(Vector3::<f64>::zeros(), |m, p| m + Vector3::from(*p).cast::<f64>()) / count;
+    let cov = points.iter().fold(Matrix3::<f64>::zeros(), |c, p| {
+        let d = Vector3::from(*p).cast::<f64>() - mean;
+        c + d * d.transpose()
+    }) / count;
+    let eig = SymmetricEigen::new(cov);
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&i, &j| eig.eigenvalues[i].total_cmp(&eig.eigenvalues[j]));
+    order.map(|k| {
+        let v = eig.eigenvectors.column(k).into_owned().cast::<f32>();
+        if v.norm() > 0.0 { v.normalize() } else { Vector3::ith(k, 1.0) }
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The six faces of the box with half-sides (0.5, 0.4, 0.3), sampled on a grid, with outward
+    /// normals. Distinct sides make its principal axes the coordinate axes.
+    fn cube_samples() -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
+        let half = [0.5f32, 0.4, 0.3];
+        let (mut p, mut n) = (Vec::new(), Vec::new());
+        let g = 8;
+        let at = |i: usize, h: f32| ((i as f32 + 0.5) / g as f32 * 2.0 - 1.0) * h;
+        for axis in 0..3 {
+            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+            for sign in [-1.0f32, 1.0] {
+                for i in 0..g {
+                    for j in 0..g {
+                        let mut x = [0.0; 3];
+                        x[axis] = half[axis] * sign;
+                        x[u] = at(i, half[u]);
+                        x[v] = at(j, half[v]);
+                        let mut nn = [0.0; 3];
+                        nn[axis] = sign;
+                        p.push(x);
+                        n.push(nn);
+                    }
+                }
+            }
+        }
+        (p, n)
+    }
+
+    #[test]
+    fn six_charts_on_a_box_take_its_face_normals_as_axes() {
+        let (p, n) = cube_samples();
+        let prior = ProjectionPrior::fit(&p, &n, 6, 0.3);
+        let mut found: Vec<[i32; 3]> = prior.axes().iter().map(|a| a.map(|c| c.round() as i32)).collect();
+        found.sort();
+        let mut want = vec![[-1, 0, 0], [1, 0, 0], [0, -1, 0], [0, 1, 0], [0, 0, -1], [0, 0, 1]];
+        want.sort();
+        assert_eq!(found, want);
+        for a in prior.axes() {
+            assert!((Vector3::from(a).norm() - 1.0).abs() < 1e-5);
+        }
+    }
+
+    #[test]
+    fn each_face_projects_into_the_middle_of_the_square_with_its_own_orientation() {
+        let (p, n) = cube_samples();
+        let prior = ProjectionPrior::fit(&p, &n, 6, 0.3);
+        for (x, nx) in p.iter().zip(&n) {
+            let i = prior.label(nx);
+            let uv = prior.target_uv(i, x);
+            assert!(uv.iter().all(|&c| (0.05 - 1e-5..=0.95 + 1e-5).contains(&c)), "{uv:?}");
+        }
+        // The projection keeps orientation: (e1, e2, axis) is right-handed on every chart.
+        for f in &prior.frames {
+            let c = Vector3::from(f.e1).cross(&Vector3::from(f.e2));
+            assert!((c - Vector3::from(f.axis)).norm() < 1e-5);
+        }
+        // The top face, 1 × 0.8 in the model frame, keeps its aspect ratio: uniform scale.
+        let top: Vec<[f32; 2]> = p
+            .iter()
+            .zip(&n)
+            .filter(|(_, nx)| nx[2] > 0.5)
+            .map(|(x, nx)| prior.target_uv(prior.label(nx), x))
+            .collect();
+        let span = |k: usize| {
+            let v = top.iter().map(|uv| uv[k]);
+            v.clone().fold(f32::NEG_INFINITY, f32::max) - v.fold(f32::INFINITY, f32::min)
+        };
+        let (a, b) = (span(0).max(span(1)), span(0).min(span(1)));
+        assert!((b / a - 0.8).abs() < 0.02, "aspect {a} × {b}");
+    }
+
+    #[test]
+    fn two_charts_split_along_the_thinnest_direction() {
+        // A flat slab, thin in y, sampled in proportion to area: its narrow sides get few samples.
+        let (p, n): (Vec<_>, Vec<_>) = cube_samples()
+            .0
+            .into_iter()
+            .zip(cube_samples().1)
+            .enumerate()
+            .filter(|(k, (_, nx))| nx[1] != 0.0 || k % 10 == 0)
+            .map(|(_, (x, nx))| ([x[0], x[1] * 0.1, x[2]], nx))
+            .unzip();
+        let prior = ProjectionPrior::fit(&p, &n, 2, 0.3);
+        let ys: Vec<f32> = prior.axes().iter().map(|a| a[1]).collect();
+        assert!(ys.iter().any(|&y| y > 0.7) && ys.iter().any(|&y| y < -0.7), "{:?}", prior.axes());
+    }
+
+    #[test]
+    fn the_weight_falls_linearly_to_zero() {
+        let cfg = WarmStartConfig { steps: 4, weight: 8.0, ..WarmStartConfig::default() };
+        let w: Vec<f32> = (0..6).map(|s| cfg.weight_at(s)).collect();
+        assert_eq!(w, vec![8.0, 6.0, 4.0, 2.0, 0.0, 0.0]);
+        assert!(!WarmStartConfig::default().enabled());
+    }
+}
