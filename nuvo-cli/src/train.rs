@@ -95,6 +95,14 @@ fn build_trainer(loaded: &LoadedConfig) -> anyhow::Result<Trainer> {
     );
     let terms: Vec<String> = trainer.terms().iter().map(|t| format!("{}×{}", t.name, t.weight)).collect();
     println!("losses: {}", terms.join(", "));
+    if let Some(w) = trainer.config().warm_start.as_ref().filter(|w| w.enabled()) {
+        println!(
+            "warm start: charts begin as projections along {} normal directions, prior weight {} fading to 0 over {} steps",
+            trainer.config().model.charts,
+            w.weight,
+            w.steps
+        );
+    }
     Ok(trainer)
 }
 
