@@ -97,8 +97,9 @@ fn build_trainer(loaded: &LoadedConfig) -> anyhow::Result<Trainer> {
     println!("losses: {}", terms.join(", "));
     if let Some(w) = trainer.config().warm_start.as_ref().filter(|w| w.enabled()) {
         println!(
-            "warm start: charts begin as projections along {} normal directions, prior weight {} fading to 0 over {} steps",
+            "warm start: {} charts begin as {} projections, prior weight {} fading to 0 over {} steps",
             trainer.config().model.charts,
+            w.projection.name(),
             w.weight,
             w.steps
         );

@@ -406,7 +406,13 @@ fn fit_warm_start(
         .into());
     }
     let points: Vec<[f32; 3]> = samples.positions.iter().map(|p| p.map(|c| c * MODEL_FRAME_SCALE)).collect();
-    let prior = ProjectionPrior::fit(&points, &samples.normals, config.model.charts, cfg.min_alignment);
+    let prior = ProjectionPrior::fit(
+        &points,
+        &samples.normals,
+        config.model.charts,
+        cfg.projection,
+        cfg.min_alignment,
+    );
     Ok(Some((prior, cfg)))
 }
 

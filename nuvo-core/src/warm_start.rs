@@ -1,5 +1,5 @@
-//! The projection warm start: an optional prior that starts every chart as an orthographic
-//! projection of the part of the surface that faces it, then fades out.
+//! The projection warm start: an optional prior that starts every chart as a fold-free projection
+//! of the part of the surface that faces it, then fades out.
 //!
 //! **Why.** From a random initialisation the cycle losses often settle on folded maps they never
 //! unfold (BENCHMARKS.md, "Initialisation"), and in a short budget the charts end up as overlapping
@@ -9,11 +9,17 @@
 //!
 //! `L_warm = −(1/|G|) Σ_x log c(x)[ℓ(x)] + (1/|G|) Σ_x Σ_i m_i(x) ‖t_i(x) − P_i(x)‖²`
 //!
-//! where `a_i` are the chart axes (spherical k-means of the surface normals, started from the
-//! principal axes of the point cloud), `ℓ(x) = argmax_i n(x)·a_i`, `m_i(x) = [n(x)·a_i > τ]`
-//! (`τ = warm_start.min_alignment`) and `P_i` projects onto the plane orthogonal to `a_i`, scaled
-//! uniformly (conformal) so the aligned part of the surface fills the middle 90% of the square.
-//! Its weight falls linearly from `warm_start.weight` to 0, while every configured loss runs as
+//! where `a_i` are the chart axes (spherical k-means, started from the principal axes of the point
+//! cloud), `P_i` is chart `i`'s map and `m_i` marks where it is trusted. Two maps
+//! (`warm_start.projection`, see [`Projection`]):
+//! - `"orthographic"`: `ℓ(x) = argmax_i n(x)·a_i` (axes from the normals), `P_i` projects onto the
+//!   plane orthogonal to `a_i`, `m_i(x) = [n(x)·a_i > τ]`;
+//! - `"azimuthal"`: with `d(x)` the unit direction from the samples' centroid, `ℓ(x) = argmax_i
+//!   d(x)·a_i` (axes from these directions), `P_i` is Lambert's equal-area map of `d` about `a_i`,
+//!   `m_i(x) = [n(x)·d(x) > τ]` (seen from the centroid) within a little past the hemisphere;
+//!
+//! `τ = warm_start.min_alignment`. Each map is scaled uniformly (conformal) so the part it
+//! supervises fills the middle 90% of the square. The prior's weight falls linearly from `warm_start.weight` to 0, while every configured loss runs as
 //! usual (the cycle losses teach `s_i` to invert the projection). Not in the paper: it is off
 //! unless a config has a `[warm_start]` table with `steps > 0`.
 //!
@@ -33,8 +39,11 @@ pub struct WarmStartConfig {
     pub steps: u64,
     /// The prior's weight at step 0.
     pub weight: f32,
-    /// `t_i` is pulled towards its projection only where `n(x)·a_i` exceeds this (in `(-1, 1)`):
-    /// below it the projection foreshortens too much, and past 0 it folds.
+    /// How charts are laid flat: `"orthographic"` or `"azimuthal"` (see [`Projection`]).
+    pub projection: Projection,
+    /// `t_i` is pulled towards its map only where the normal faces the axis (orthographic: `n·a_i`)
+    /// or the centroid's eye (azimuthal: `n·d`) by more than this cosine (in `(-1, 1)`): below it
+    /// the map foreshortens too much, and past 0 it folds.
     pub min_alignment: f32,
     /// Surface samples drawn once to fit the axes and the projections' extents.
     pub samples: usize,
@@ -42,7 +51,13 @@ pub struct WarmStartConfig {
 
 impl Default for WarmStartConfig {
     fn default() -> Self {
-        WarmStartConfig { steps: 0, weight: 10.0, min_alignment: 0.3, samples: 20_000 }
+        WarmStartConfig {
+            steps: 0,
+            weight: 10.0,
+            projection: Projection::Orthographic,
+            min_alignment: 0.3,
+            samples: 20_000,
+        }
     }
 }
 
@@ -58,7 +73,33 @@ impl WarmStartConfig {
     }
 }
 
-/// One chart's projection: UV = `origin + scale · (x·e1, x·e2)`, with `e1 × e2 = axis`.
+/// How a chart's points are laid flat.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Projection {
+    /// Along the chart's axis onto the plane orthogonal to it; charts and axes come from the
+    /// normals. Fold-free where the normal faces the axis, but it squashes the surface towards each
+    /// chart's silhouette (area factor `n·a`).
+    #[default]
+    Orthographic,
+    /// Lambert's azimuthal equal-area map of the direction `d` from the sample's centroid, about the
+    /// chart's axis; charts and axes come from these directions. Fold-free where the surface is
+    /// seen from the centroid (`n·d > 0`), and area-preserving on a sphere around it: no squashed
+    /// rim on blob-like objects, and straight seams through the centroid.
+    Azimuthal,
+}
+
+impl Projection {
+    /// The config spelling.
+    pub fn name(self) -> &'static str {
+        match self {
+            Projection::Orthographic => "orthographic",
+            Projection::Azimuthal => "azimuthal",
+        }
+    }
+}
+
+/// One chart's map: UV = `origin + scale · planar(x)`, with `e1 × e2 = axis`.
 #[derive(Clone, Debug, PartialEq)]
 struct ChartFrame {
     axis: [f32; 3],
@@ -79,16 +120,15 @@ impl ChartFrame {
         ChartFrame { axis, e1: e1.into(), e2: e2.into(), origin: [0.0; 2], scale: 1.0 }
     }
 
-    fn project(&self, x: &[f32; 3]) -> [f32; 2] {
-        [self.origin[0] + self.scale * dot(x, &self.e1), self.origin[1] + self.scale * dot(x, &self.e2)]
+    fn to_uv(&self, planar: [f32; 2]) -> [f32; 2] {
+        [self.origin[0] + self.scale * planar[0], self.origin[1] + self.scale * planar[1]]
     }
 
-    /// Scales and offsets the projection so the points it supervises fill the middle 90% of the
+    /// Scales and offsets the map so the planar points it supervises fill the middle 90% of the
     /// square (keeping the aspect ratio). Leaves the frame alone when there are none.
-    fn fit_extent<'a>(&mut self, points: impl Iterator<Item = &'a [f32; 3]>) {
+    fn fit_extent(&mut self, planar: impl Iterator<Item = [f32; 2]>) {
         let (mut lo, mut hi) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
-        for p in points {
-            let q = [dot(p, &self.e1), dot(p, &self.e2)];
+        for q in planar {
             for k in 0..2 {
                 lo[k] = lo[k].min(q[k]);
                 hi[k] = hi[k].max(q[k]);
@@ -109,9 +149,12 @@ fn dot(a: &[f32; 3], b: &[f32; 3]) -> f32 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
-/// The fitted prior: one projection per chart.
+/// The fitted prior: one map per chart.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ProjectionPrior {
+    projection: Projection,
+    /// The sample's centroid (the azimuthal maps' eye).
+    center: [f32; 3],
     frames: Vec<ChartFrame>,
     min_alignment: f32,
 }
@@ -119,16 +162,32 @@ pub struct ProjectionPrior {
 /// Rounds of spherical k-means that adapt the starting axes to the normals.
 const KMEANS_ROUNDS: usize = 10;
 
+/// Azimuthal charts stop this far past their hemisphere (`d·a > −AZIMUTHAL_REACH`), where the
+/// equal-area map starts to blow up towards the antipode.
+const AZIMUTHAL_REACH: f32 = 0.2;
+
 impl ProjectionPrior {
-    /// Fits `charts` projections to surface samples (model frame) and their unit normals.
+    /// Fits `charts` maps to surface samples (model frame) and their unit normals.
     /// Deterministic; `points` and `normals` must have equal lengths.
-    pub fn fit(points: &[[f32; 3]], normals: &[[f32; 3]], charts: usize, min_alignment: f32) -> Self {
+    pub fn fit(
+        points: &[[f32; 3]],
+        normals: &[[f32; 3]],
+        charts: usize,
+        projection: Projection,
+        min_alignment: f32,
+    ) -> Self {
         debug_assert_eq!(points.len(), normals.len());
-        let mut axes = starting_axes(points, normals, charts);
+        let count = points.len().max(1) as f32;
+        let center = points
+            .iter()
+            .fold([0.0f32; 3], |c, p| [c[0] + p[0] / count, c[1] + p[1] / count, c[2] + p[2] / count]);
+        let mut prior = ProjectionPrior { projection, center, frames: Vec::new(), min_alignment };
+        let keys: Vec<[f32; 3]> = points.iter().zip(normals).map(|(x, n)| prior.key(x, n)).collect();
+        let mut axes = starting_axes(points, &keys, charts);
         for _ in 0..KMEANS_ROUNDS {
             let mut sums = vec![Vector3::<f32>::zeros(); charts];
-            for n in normals {
-                sums[best_axis(&axes, n)] += Vector3::from(*n);
+            for k in &keys {
+                sums[best_axis(&axes, k)] += Vector3::from(*k);
             }
             for (axis, sum) in axes.iter_mut().zip(&sums) {
                 if sum.norm() > 0.0 {
@@ -136,16 +195,58 @@ impl ProjectionPrior {
                 }
             }
         }
-        let frames = axes
-            .iter()
-            .map(|&axis| {
-                let mut frame = ChartFrame::new(axis);
-                let aligned = points.iter().zip(normals).filter(|(_, n)| dot(n, &axis) > min_alignment);
-                frame.fit_extent(aligned.map(|(p, _)| p));
-                frame
-            })
-            .collect();
-        ProjectionPrior { frames, min_alignment }
+        prior.frames = axes.iter().map(|&axis| ChartFrame::new(axis)).collect();
+        for i in 0..charts {
+            let supervised = points.iter().zip(normals).filter(|(x, n)| prior.supervises(i, x, n));
+            let planar: Vec<[f32; 2]> = supervised.map(|(x, _)| prior.planar(i, x)).collect();
+            prior.frames[i].fit_extent(planar.into_iter());
+        }
+        prior
+    }
+
+    /// The unit vector charts are assigned by: the normal (orthographic) or the direction from the
+    /// centroid (azimuthal).
+    fn key(&self, x: &[f32; 3], n: &[f32; 3]) -> [f32; 3] {
+        match self.projection {
+            Projection::Orthographic => *n,
+            Projection::Azimuthal => self.direction(x),
+        }
+    }
+
+    fn direction(&self, x: &[f32; 3]) -> [f32; 3] {
+        let d = Vector3::from(*x) - Vector3::from(self.center);
+        if d.norm() > 0.0 {
+            d.normalize().into()
+        } else {
+            self.frames.first().map_or([0.0, 0.0, 1.0], |f| f.axis)
+        }
+    }
+
+    /// Chart `i`'s map of `x` before scaling into the square.
+    fn planar(&self, i: usize, x: &[f32; 3]) -> [f32; 2] {
+        let f = &self.frames[i];
+        match self.projection {
+            Projection::Orthographic => [dot(x, &f.e1), dot(x, &f.e2)],
+            Projection::Azimuthal => {
+                // Lambert: radius 2·sin(θ/2) along the azimuth, i.e. the in-plane part of `d`
+                // times √(2 / (1 + cos θ)).
+                let d = self.direction(x);
+                let k = (2.0 / (1.0 + dot(&d, &f.axis)).max(1e-3)).sqrt();
+                [k * dot(&d, &f.e1), k * dot(&d, &f.e2)]
+            }
+        }
+    }
+
+    /// Whether chart `i`'s map is trusted (fold-free and not too distorted) at `x` with normal `n`.
+    fn supervises(&self, i: usize, x: &[f32; 3], n: &[f32; 3]) -> bool {
+        let axis = &self.frames[i].axis;
+        match self.projection {
+            Projection::Orthographic => dot(n, axis) > self.min_alignment,
+            Projection::Azimuthal => {
+                let d = self.direction(x);
+                dot(&d, axis) > -AZIMUTHAL_REACH && dot(n, &d) > self.min_alignment
+            }
+        }
     }
 
     /// The charts' axes (unit vectors).
@@ -153,14 +254,15 @@ impl ProjectionPrior {
         self.frames.iter().map(|f| f.axis).collect()
     }
 
-    /// The chart a point with normal `n` starts in: the one whose axis it faces most.
-    pub fn label(&self, n: &[f32; 3]) -> usize {
-        best_axis(&self.axes(), n)
+    /// The chart point `x` with normal `n` starts in: the one whose axis its normal (orthographic)
+    /// or its direction from the centroid (azimuthal) faces most.
+    pub fn label(&self, x: &[f32; 3], n: &[f32; 3]) -> usize {
+        best_axis(&self.axes(), &self.key(x, n))
     }
 
     /// Chart `i`'s target UV for point `x`.
     pub fn target_uv(&self, i: usize, x: &[f32; 3]) -> [f32; 2] {
-        self.frames[i].project(x)
+        self.frames[i].to_uv(self.planar(i, x))
     }
 
     /// Records `L_warm` (module docs) for the step's batch on the context's tape, reusing its
@@ -172,14 +274,12 @@ impl ProjectionPrior {
         let mut one_hot = Tensor::zeros(b, n);
         let mut targets: Vec<Tensor> = (0..n).map(|_| Tensor::zeros(b, 2)).collect();
         let mut masks: Vec<Tensor> = (0..n).map(|_| Tensor::zeros(b, 1)).collect();
-        let axes = self.axes();
         for (r, (x, nx)) in points.iter().zip(normals).enumerate() {
-            one_hot.data_mut()[r * n + best_axis(&axes, nx)] = 1.0;
-            for (i, frame) in self.frames.iter().enumerate() {
-                if dot(nx, &frame.axis) > self.min_alignment {
+            one_hot.data_mut()[r * n + self.label(x, nx)] = 1.0;
+            for i in 0..n {
+                if self.supervises(i, x, nx) {
                     masks[i].data_mut()[r] = 1.0;
-                    let uv = frame.project(x);
-                    targets[i].data_mut()[2 * r..2 * r + 2].copy_from_slice(&uv);
+                    targets[i].data_mut()[2 * r..2 * r + 2].copy_from_slice(&self.target_uv(i, x));
                 }
             }
         }
@@ -213,7 +313,7 @@ fn best_axis(axes: &[[f32; 3]], n: &[f32; 3]) -> usize {
 }
 
 /// The first axes: `±` the principal directions of the points, thinnest first (so two charts
-/// split the object into its two broad sides), then normals farthest from every axis so far.
+/// split the object into its two broad sides), then the keys farthest from every axis so far.
 fn starting_axes(points: &[[f32; 3]], normals: &[[f32; 3]], charts: usize) -> Vec<[f32; 3]> {
     let mut axes: Vec<[f32; 3]> = Vec::with_capacity(charts);
     for dir in principal_directions(points) {
@@ -289,7 +389,7 @@ mod tests {
     #[test]
     fn six_charts_on_a_box_take_its_face_normals_as_axes() {
         let (p, n) = cube_samples();
-        let prior = ProjectionPrior::fit(&p, &n, 6, 0.3);
+        let prior = ProjectionPrior::fit(&p, &n, 6, Projection::Orthographic, 0.3);
         let mut found: Vec<[i32; 3]> = prior.axes().iter().map(|a| a.map(|c| c.round() as i32)).collect();
         found.sort();
         let mut want = vec![[-1, 0, 0], [1, 0, 0], [0, -1, 0], [0, 1, 0], [0, 0, -1], [0, 0, 1]];
@@ -303,9 +403,9 @@ mod tests {
     #[test]
     fn each_face_projects_into_the_middle_of_the_square_with_its_own_orientation() {
         let (p, n) = cube_samples();
-        let prior = ProjectionPrior::fit(&p, &n, 6, 0.3);
+        let prior = ProjectionPrior::fit(&p, &n, 6, Projection::Orthographic, 0.3);
         for (x, nx) in p.iter().zip(&n) {
-            let i = prior.label(nx);
+            let i = prior.label(x, nx);
             let uv = prior.target_uv(i, x);
             assert!(uv.iter().all(|&c| (0.05 - 1e-5..=0.95 + 1e-5).contains(&c)), "{uv:?}");
         }
@@ -319,7 +419,7 @@ mod tests {
             .iter()
             .zip(&n)
             .filter(|(_, nx)| nx[2] > 0.5)
-            .map(|(x, nx)| prior.target_uv(prior.label(nx), x))
+            .map(|(x, nx)| prior.target_uv(prior.label(x, nx), x))
             .collect();
         let span = |k: usize| {
             let v = top.iter().map(|uv| uv[k]);
@@ -340,9 +440,49 @@ mod tests {
             .filter(|(k, (_, nx))| nx[1] != 0.0 || k % 10 == 0)
             .map(|(_, (x, nx))| ([x[0], x[1] * 0.1, x[2]], nx))
             .unzip();
-        let prior = ProjectionPrior::fit(&p, &n, 2, 0.3);
+        let prior = ProjectionPrior::fit(&p, &n, 2, Projection::Orthographic, 0.3);
         let ys: Vec<f32> = prior.axes().iter().map(|a| a[1]).collect();
         assert!(ys.iter().any(|&y| y > 0.7) && ys.iter().any(|&y| y < -0.7), "{:?}", prior.axes());
+    }
+
+    #[test]
+    fn azimuthal_charts_split_a_sphere_into_hemispheres_with_equal_area_radii() {
+        // A Fibonacci sphere of radius 0.5 around (0.1, 0, 0): its centroid is the eye.
+        let count = 4000;
+        let c = Vector3::new(0.1f32, 0.0, 0.0);
+        let (p, n): (Vec<[f32; 3]>, Vec<[f32; 3]>) = (0..count)
+            .map(|k| {
+                let z = 1.0 - 2.0 * (k as f32 + 0.5) / count as f32;
+                let r = (1.0 - z * z).sqrt();
+                let a = k as f32 * 2.399_963;
+                let d = Vector3::new(r * a.cos(), r * a.sin(), z);
+                let (x, d): ([f32; 3], [f32; 3]) = ((c + 0.5 * d).into(), d.into());
+                (x, d)
+            })
+            .unzip();
+        let prior = ProjectionPrior::fit(&p, &n, 2, Projection::Azimuthal, 0.3);
+        let [a0, a1] = [prior.axes()[0], prior.axes()[1]];
+        assert!(dot(&a0, &a1) < -0.99, "two charts look in opposite directions: {a0:?} {a1:?}");
+        for (chart, f) in prior.frames.iter().enumerate() {
+            let (a, e) = (Vector3::from(f.axis), Vector3::from(f.e1));
+            let uv_at =
+                |angle: f32| prior.target_uv(chart, &(c + 0.5 * (angle.cos() * a + angle.sin() * e)).into());
+            let from_centre = |angle: f32| {
+                let (uv, o) = (uv_at(angle), uv_at(0.0));
+                (uv[0] - o[0]).hypot(uv[1] - o[1])
+            };
+            // Lambert: radius ∝ 2·sin(θ/2), so 90° lies √2 times as far out as 60°.
+            let ratio = from_centre(std::f32::consts::FRAC_PI_2) / from_centre(std::f32::consts::FRAC_PI_3);
+            assert!((ratio - std::f32::consts::SQRT_2).abs() < 1e-3, "chart {chart}: ratio {ratio}");
+        }
+        let mut per_chart = [0usize; 2];
+        for (x, nx) in p.iter().zip(&n) {
+            let i = prior.label(x, nx);
+            per_chart[i] += 1;
+            let uv = prior.target_uv(i, x);
+            assert!(uv.iter().all(|&c| (0.0..=1.0).contains(&c)), "{uv:?}");
+        }
+        assert!(per_chart.iter().all(|&k| k.abs_diff(count / 2) < count / 20), "{per_chart:?}");
     }
 
     #[test]

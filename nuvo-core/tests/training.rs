@@ -384,7 +384,7 @@ fn agreement_with_the_projection_prior(warm_start: &str, steps: usize) -> (f32, 
     for (k, p) in pts.iter().enumerate() {
         let row = &probs[k * 6..k * 6 + 6];
         let best = (0..6).max_by(|&a, &b| row[a].total_cmp(&row[b])).unwrap();
-        let label = prior.label(p);
+        let label = prior.label(&p.map(|c| c * 0.5), p);
         agree += usize::from(best == label);
         let target = prior.target_uv(label, &p.map(|c| c * 0.5));
         let uv = &uvs[(k * 6 + label) * 2..(k * 6 + label) * 2 + 2];
