@@ -36,22 +36,13 @@ impl StepBatch {
         seed: u64,
         step: u64,
     ) -> Result<Self, ShortBatch> {
-        let samples = source.sample(batch_3d, derive(seed, step, Stream::Surface));
-        if samples.len() != batch_3d || samples.normals.len() != batch_3d {
-            return Err(ShortBatch {
-                source_kind: source.kind().to_owned(),
-                got: samples.len(),
-                wanted: batch_3d,
-            });
-        }
-        let points: Vec<[f32; 3]> =
-            samples.positions.iter().map(|p| p.map(|c| c * MODEL_FRAME_SCALE)).collect();
+        let SurfaceSamples { points, normals } =
+            surface_samples(source, batch_3d, derive(seed, step, Stream::Surface))?;
         let mut rng = ChaCha8Rng::seed_from_u64(derive(seed, step, Stream::Uv));
         let uv = (0..batch_uv).map(|_| [rng.random::<f32>(), rng.random::<f32>()]).collect();
         let mut rng = ChaCha8Rng::seed_from_u64(derive(seed, step, Stream::Tangents));
-        let (tangents_p, tangents_q) =
-            samples.normals.iter().map(|n| random_tangent_frame(n, &mut rng)).unzip();
-        Ok(StepBatch { points, normals: samples.normals, uv, tangents_p, tangents_q })
+        let (tangents_p, tangents_q) = normals.iter().map(|n| random_tangent_frame(n, &mut rng)).unzip();
+        Ok(StepBatch { points, normals, uv, tangents_p, tangents_q })
     }
 
     /// The loss context's view of this batch.
@@ -65,6 +56,29 @@ impl StepBatch {
             epsilon,
         }
     }
+}
+
+/// Surface samples in the model frame. Invariant: `points` and `normals` have equal lengths.
+#[derive(Clone, Debug, Default)]
+pub struct SurfaceSamples {
+    pub points: Vec<[f32; 3]>,
+    /// Unit normals.
+    pub normals: Vec<[f32; 3]>,
+}
+
+/// Exactly `count` surface samples drawn with `seed`. A source that returns fewer (or mismatched
+/// normals) is a [`ShortBatch`].
+pub fn surface_samples(
+    source: &dyn GeometrySource,
+    count: usize,
+    seed: u64,
+) -> Result<SurfaceSamples, ShortBatch> {
+    let samples = source.sample(count, seed);
+    if samples.len() != count || samples.normals.len() != count {
+        return Err(ShortBatch { source_kind: source.kind().to_owned(), got: samples.len(), wanted: count });
+    }
+    let points = samples.positions.iter().map(|p| p.map(|c| c * MODEL_FRAME_SCALE)).collect();
+    Ok(SurfaceSamples { points, normals: samples.normals })
 }
 
 fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {

@@ -12,7 +12,7 @@ use nuvo_autodiff::{ParamStore, Shape, Tape, Var};
 use nuvo_geometry::{BuildContext, GeometryError, GeometrySource, SourceRegistry};
 use nuvo_losses::{Loss, LossError, LossRegistry, Networks, StepContext};
 
-use crate::batch::{ShortBatch, StepBatch};
+use crate::batch::{ShortBatch, StepBatch, surface_samples};
 use crate::checkpoint::{Checkpoint, CheckpointError};
 use crate::config::{ConfigError, ExperimentConfig, LoadedConfig};
 use crate::model::{MODEL_FRAME_SCALE, NuvoModel, groups};
@@ -264,23 +264,17 @@ impl Trainer {
             }
             let v = term.loss.evaluate(&mut ctx)?;
             values.push((term.name.clone(), ctx.tape.scalar(v)));
-            let w = ctx.tape.scale(v, term.weight_at(self.step));
-            total = Some(match total {
-                None => w,
-                Some(t) => ctx.tape.add(t, w),
-            });
+            total = Some(add_weighted(ctx.tape, total, v, term.weight_at(self.step)));
         }
         if let Some((prior, cfg)) = &self.warm_start
             && only.is_none()
-            && cfg.weight_at(self.step) > 0.0
         {
-            let v = prior.evaluate(&mut ctx);
-            values.push((WARM_START_TERM.to_owned(), ctx.tape.scalar(v)));
-            let w = ctx.tape.scale(v, cfg.weight_at(self.step));
-            total = Some(match total {
-                None => w,
-                Some(t) => ctx.tape.add(t, w),
-            });
+            let weight = cfg.weight_at(self.step);
+            if weight > 0.0 {
+                let v = prior.evaluate(&mut ctx);
+                values.push((WARM_START_TERM.to_owned(), ctx.tape.scalar(v)));
+                total = Some(add_weighted(ctx.tape, total, v, weight));
+            }
         }
         Ok(total.unwrap_or_else(|| ctx.tape.constant(Shape::SCALAR, 0.0)))
     }
@@ -396,24 +390,24 @@ fn fit_warm_start(
     let Some(cfg) = config.warm_start.clone().filter(WarmStartConfig::enabled) else {
         return Ok(None);
     };
-    let samples = source.sample(cfg.samples, derive(config.seed, 0, Stream::WarmStart));
-    if samples.len() != cfg.samples || samples.normals.len() != cfg.samples {
-        return Err(ShortBatch {
-            source_kind: source.kind().to_owned(),
-            got: samples.len(),
-            wanted: cfg.samples,
-        }
-        .into());
-    }
-    let points: Vec<[f32; 3]> = samples.positions.iter().map(|p| p.map(|c| c * MODEL_FRAME_SCALE)).collect();
+    let sample = surface_samples(source, cfg.samples, derive(config.seed, 0, Stream::WarmStart))?;
     let prior = ProjectionPrior::fit(
-        &points,
-        &samples.normals,
+        &sample.points,
+        &sample.normals,
         config.model.charts,
         cfg.projection,
         cfg.min_alignment,
     );
     Ok(Some((prior, cfg)))
+}
+
+/// `total + weight · v` on the tape (`weight · v` when there is no total yet).
+fn add_weighted(tape: &mut Tape, total: Option<Var>, v: Var, weight: f32) -> Var {
+    let w = tape.scale(v, weight);
+    match total {
+        None => w,
+        Some(t) => tape.add(t, w),
+    }
 }
 
 fn grads_finite(p: &ParamStore) -> bool {
