@@ -187,7 +187,7 @@ impl ProjectionPrior {
         for _ in 0..KMEANS_ROUNDS {
             let mut sums = vec![Vector3::<f32>::zeros(); charts];
             for k in &keys {
-                sums[best_axis(&axes, k)] += Vector3::from(*k);
+                sums[best_axis(axes.iter().copied(), k)] += Vector3::from(*k);
             }
             for (axis, sum) in axes.iter_mut().zip(&sums) {
                 if sum.norm() > 0.0 {
@@ -257,7 +257,7 @@ impl ProjectionPrior {
     /// The chart point `x` with normal `n` starts in: the one whose axis its normal (orthographic)
     /// or its direction from the centroid (azimuthal) faces most.
     pub fn label(&self, x: &[f32; 3], n: &[f32; 3]) -> usize {
-        best_axis(&self.axes(), &self.key(x, n))
+        best_axis(self.frames.iter().map(|f| f.axis), &self.key(x, n))
     }
 
     /// Chart `i`'s target UV for point `x`.
@@ -308,13 +308,15 @@ impl ProjectionPrior {
     }
 }
 
-fn best_axis(axes: &[[f32; 3]], n: &[f32; 3]) -> usize {
-    (0..axes.len()).max_by(|&i, &j| dot(n, &axes[i]).total_cmp(&dot(n, &axes[j]))).unwrap_or(0)
+/// The index of the axis `n` is most aligned with (the last of equals; 0 when there are none).
+fn best_axis(axes: impl IntoIterator<Item = [f32; 3]>, n: &[f32; 3]) -> usize {
+    let alignments = axes.into_iter().map(|a| dot(n, &a)).enumerate();
+    alignments.max_by(|(_, a), (_, b)| a.total_cmp(b)).map_or(0, |(i, _)| i)
 }
 
 /// The first axes: `±` the principal directions of the points, thinnest first (so two charts
 /// split the object into its two broad sides), then the keys farthest from every axis so far.
-fn starting_axes(points: &[[f32; 3]], normals: &[[f32; 3]], charts: usize) -> Vec<[f32; 3]> {
+fn starting_axes(points: &[[f32; 3]], keys: &[[f32; 3]], charts: usize) -> Vec<[f32; 3]> {
     let mut axes: Vec<[f32; 3]> = Vec::with_capacity(charts);
     for dir in principal_directions(points) {
         for sign in [1.0, -1.0] {
@@ -324,7 +326,7 @@ fn starting_axes(points: &[[f32; 3]], normals: &[[f32; 3]], charts: usize) -> Ve
         }
     }
     while axes.len() < charts {
-        let far = normals.iter().min_by(|a, b| {
+        let far = keys.iter().min_by(|a, b| {
             let closeness = |n: &[f32; 3]| axes.iter().map(|ax| dot(n, ax)).fold(f32::NEG_INFINITY, f32::max);
             closeness(a).total_cmp(&closeness(b))
         });
