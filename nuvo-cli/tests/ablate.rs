@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 mod common;
-use common::{nuvo, repo, run};
+use common::{SMALLEST_MODEL, nuvo, repo, run};
 
 fn sweep_config(dir: &Path) -> PathBuf {
     let bunny = repo().join("assets/stanford-bunny.obj");
@@ -14,11 +14,7 @@ fn sweep_config(dir: &Path) -> PathBuf {
 [geometry]
 source = "mesh"
 path = {bunny:?}
-[model]
-charts = 2
-depth = 2
-width = 16
-grid_resolution = 8
+{SMALLEST_MODEL}
 [training]
 steps = 3
 batch_3d = 128

@@ -4,7 +4,7 @@
 use nuvo_geometry::testdata::data_file;
 
 mod common;
-use common::{nuvo, run};
+use common::{SMALLEST_MODEL, nuvo, run};
 
 #[test]
 fn a_density_run_without_bake_mesh_bakes_onto_the_grids_own_mesh() {
@@ -20,11 +20,7 @@ fn a_density_run_without_bake_mesh_bakes_onto_the_grids_own_mesh() {
 source = "density"
 path = {grid:?}
 bounds = [[10, 0, 0], [14, 4, 4]]
-[model]
-charts = 2
-depth = 2
-width = 16
-grid_resolution = 8
+{SMALLEST_MODEL}
 [training]
 steps = 2
 batch_3d = 128

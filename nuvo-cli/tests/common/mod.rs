@@ -12,6 +12,10 @@ pub fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf()
 }
 
+/// The `[model]` table of the smallest networks the end-to-end tests train: two charts of 2×16 MLPs,
+/// 8² normal grids. Fast enough for a few steps of any source.
+pub const SMALLEST_MODEL: &str = "[model]\ncharts = 2\ndepth = 2\nwidth = 16\ngrid_resolution = 8\n";
+
 /// A small experiment on the bundled bunny, written into `dir`.
 pub fn tiny_config(dir: &Path, steps: u64, checkpoint_every: u64) -> PathBuf {
     tiny_config_for(dir, &repo().join("assets/stanford-bunny.obj"), steps, checkpoint_every)
