@@ -32,13 +32,22 @@ pub(super) const STRETCH: LossInfo = LossInfo {
             doc: "use the signed area (positive when the UV image keeps the orientation of (p, q, n)), so \
                   mirrored (folded) regions cost ≈ 4σ²; an extension of the paper, which uses |area|",
         },
+        OptionDoc {
+            name: "relative",
+            default: "false",
+            doc: "score the spread of the area relative to its size, 1 − E[A]²/E[A²] (= min over σ of \
+                  E[(A/σ − 1)²]), instead of (A − σ)²: invariant to the charts' overall size, so it does \
+                  not reward shrinking them as the paper's form does; σ is then unused. An extension of \
+                  the paper",
+        },
     ],
 };
 
 /// `L_conformal = (1/|G|) Σ_x Σ_i c(x)[i] · cos²(D t_i(εp), D t_i(εq))`.
 pub struct Conformal;
 
-/// `L_stretch = (1/|G|) Σ_x Σ_i c(x)[i] · (‖D t_i(εp) × D t_i(εq)‖ − σ)²`.
+/// `L_stretch = (1/|G|) Σ_x Σ_i c(x)[i] · (‖D t_i(εp) × D t_i(εq)‖ − σ)²`, or its scale-free
+/// variant (see [`StretchOptions::relative`]).
 pub struct Stretch {
     options: StretchOptions,
 }
@@ -53,6 +62,15 @@ pub struct StretchOptions {
     /// a mirrored region, where the map reverses the orientation of the tangent frame `(p, q, n)`,
     /// then costs about `4σ²` instead of nothing, which pushes folded maps to cut and unfold.
     pub signed: bool,
+    /// Score `1 − E[A]²/E[A²]` (expectations weighted by `c(x)` as in the paper's sum) instead of
+    /// `E[(A − σ)²]`. It is `min_σ E[(A/σ − 1)²]`: the same "uniform stretch" goal, measured relative
+    /// to the stretch itself, so scaling every chart by λ leaves it unchanged. The paper's form is
+    /// `σ²` times that at its optimum, so it falls as the charts shrink, and a strong stretch weight
+    /// then buys uniformity by shrinking the atlas into a corner of each chart square. This form
+    /// ranges over `[0, 1]`: 0 for uniform stretch, 1 for a collapsed map (or, with `signed`, for
+    /// equal mirrored and unmirrored areas). A wholly mirrored atlas costs the same as its mirror
+    /// image. The learned σ is unused.
+    pub relative: bool,
 }
 
 /// The scale of the stretch loss's area.
@@ -112,21 +130,47 @@ fn parallelogram_area(ctx: &mut StepContext<'_>, a: Var, b: Var, signed: bool) -
     if signed { cross } else { t.abs(cross) }
 }
 
+impl Stretch {
+    /// Chart `i`'s parallelogram areas (`B×1`) in the units `options.area` asks for.
+    fn areas(&self, ctx: &mut StepContext<'_>, i: usize) -> Var {
+        let eps = ctx.data().epsilon;
+        let (a, b) = ctx.uv_differentials(i);
+        let area = parallelogram_area(ctx, a, b, self.options.signed);
+        match self.options.area {
+            AreaScale::Paper => area,
+            AreaScale::Jacobian => ctx.tape.scale(area, 1.0 / (eps * eps)),
+        }
+    }
+}
+
+/// Keeps `E[A]²/E[A²]` finite when every area is zero (the relative loss is then 1).
+const SECOND_MOMENT_FLOOR: f32 = 1e-30;
+
+/// `1 − E[A]²/(E[A²] + floor)` with `c(x)`-weighted expectations over the charts' areas.
+fn relative_spread(ctx: &mut StepContext<'_>, areas: &[Var]) -> Var {
+    let squares: Vec<Var> = areas.iter().map(|&a| ctx.tape.square(a)).collect();
+    let mean = chart_weighted_mean(ctx, areas);
+    let mean_square = chart_weighted_mean(ctx, &squares);
+    let t = &mut *ctx.tape;
+    let mean2 = t.square(mean);
+    let denominator = t.add_scalar(mean_square, SECOND_MOMENT_FLOOR);
+    let ratio = t.div(mean2, denominator);
+    let negated = t.scale(ratio, -1.0);
+    t.add_scalar(negated, 1.0)
+}
+
 impl Loss for Stretch {
     fn evaluate(&self, ctx: &mut StepContext<'_>) -> Result<Var, LossError> {
-        let eps = ctx.data().epsilon;
+        let areas: Vec<Var> = (0..ctx.charts()).map(|i| self.areas(ctx, i)).collect();
+        if self.options.relative {
+            return Ok(relative_spread(ctx, &areas));
+        }
         let sigma = ctx.sigma();
-        let per_chart: Vec<Var> = (0..ctx.charts())
-            .map(|i| {
-                let (a, b) = ctx.uv_differentials(i);
-                let area = parallelogram_area(ctx, a, b, self.options.signed);
-                let t = &mut *ctx.tape;
-                let area = match self.options.area {
-                    AreaScale::Paper => area,
-                    AreaScale::Jacobian => t.scale(area, 1.0 / (eps * eps)),
-                };
-                let d = t.sub(area, sigma);
-                t.square(d)
+        let per_chart: Vec<Var> = areas
+            .iter()
+            .map(|&area| {
+                let d = ctx.tape.sub(area, sigma);
+                ctx.tape.square(d)
             })
             .collect();
         Ok(chart_weighted_mean(ctx, &per_chart))
@@ -156,10 +200,11 @@ mod tests {
         // t(x) = (2x, y): area of (2ε, 0) and (0, ε) is 2ε² (paper) or 2 (jacobian); σ = 0.5.
         let scene = Scene::plane_points(&[[0.1, 0.2, 0.0]]).with_texture_scale(2.0).with_sigma(0.5);
         let eps = scene.epsilon();
-        let paper = Stretch { options: StretchOptions { area: AreaScale::Paper, signed: false } };
+        let paper = Stretch { options: StretchOptions { area: AreaScale::Paper, ..Default::default() } };
         let want = (2.0 * eps * eps - 0.5).powi(2);
         assert!((scene.evaluate(&paper) - want).abs() < 1e-4);
-        let jacobian = Stretch { options: StretchOptions { area: AreaScale::Jacobian, signed: false } };
+        let jacobian =
+            Stretch { options: StretchOptions { area: AreaScale::Jacobian, ..Default::default() } };
         assert!((scene.evaluate(&jacobian) - 2.25).abs() < 2e-3, "{}", scene.evaluate(&jacobian));
     }
 
@@ -168,10 +213,55 @@ mod tests {
         // t(x) = (−2x, y) mirrors the tangent frame: the signed area is −2 (jacobian units), so the
         // loss is (−2 − 0.5)² = 6.25, against (2 − 0.5)² = 2.25 unsigned.
         let scene = Scene::plane_points(&[[0.1, 0.2, 0.0]]).with_texture_scale(-2.0).with_sigma(0.5);
-        let signed = Stretch { options: StretchOptions { area: AreaScale::Jacobian, signed: true } };
+        let signed = Stretch {
+            options: StretchOptions { area: AreaScale::Jacobian, signed: true, ..Default::default() },
+        };
         assert!((scene.evaluate(&signed) - 6.25).abs() < 5e-3, "{}", scene.evaluate(&signed));
-        let unsigned = Stretch { options: StretchOptions { area: AreaScale::Jacobian, signed: false } };
+        let unsigned =
+            Stretch { options: StretchOptions { area: AreaScale::Jacobian, ..Default::default() } };
         assert!((scene.evaluate(&unsigned) - 2.25).abs() < 2e-3);
+    }
+
+    fn relative(signed: bool) -> Stretch {
+        Stretch { options: StretchOptions { area: AreaScale::Jacobian, signed, relative: true } }
+    }
+
+    #[test]
+    fn relative_stretch_is_the_scale_free_spread_of_the_area() {
+        // t(x) = (k·x, y) has area factor k on the plane z = const (normal +z) and k/√2 on a plane
+        // with normal (0, 1, 1)/√2 (tangents x and (0, 1, −1)/√2 map to (k, 0) and (0, 1/√2)). One
+        // chart: 1 − E[A]²/E[A²] = 1 − ((1 + 1/√2)/2)² / ((1 + 1/2)/2) ≈ 0.028595, whatever k is.
+        let r = std::f32::consts::FRAC_1_SQRT_2;
+        let want = 1.0 - ((1.0 + r) / 2.0).powi(2) / 0.75;
+        for k in [0.5, 2.0, 5.0] {
+            let scene = Scene::plane_points(&[[0.1, 0.2, 0.0], [0.3, 0.1, 0.0]])
+                .with_normals(&[[0.0, 0.0, 1.0], [0.0, r, r]])
+                .with_texture_scale(k);
+            let got = scene.evaluate(&relative(false));
+            assert!((got - want).abs() < 1e-3, "k = {k}: {got} vs {want}");
+        }
+        // A uniform map costs nothing at any scale (the paper's form would charge (k − σ)²).
+        let uniform = Scene::plane_points(&[[0.1, 0.2, 0.0], [0.3, 0.1, 0.0]]).with_texture_scale(3.0);
+        assert!(uniform.evaluate(&relative(false)) < 1e-4);
+    }
+
+    #[test]
+    fn signed_relative_stretch_charges_mixed_orientations_and_collapse() {
+        // Normals +z and −z under the same map: signed areas k and −k, so E[A] = 0 and the loss is
+        // 1; unsigned, the two areas are equal and the loss is 0.
+        let scene = Scene::plane_points(&[[0.1, 0.2, 0.0], [0.3, 0.1, 0.0]])
+            .with_normals(&[[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
+            .with_texture_scale(2.0);
+        assert!((scene.evaluate(&relative(true)) - 1.0).abs() < 1e-3);
+        assert!(scene.evaluate(&relative(false)) < 1e-4);
+        // A wholly mirrored map is its mirror image's equal.
+        let mirrored = Scene::plane_points(&[[0.1, 0.2, 0.0]]).with_texture_scale(-2.0);
+        assert!(mirrored.evaluate(&relative(true)) < 1e-4);
+        // A collapsed map (zero area everywhere) is the worst case, not a way out.
+        let collapsed =
+            Scene::plane_points(&[[0.1, 0.2, 0.0]]).with_texture_scale(0.0).with_texture_shear(0.0);
+        let got = collapsed.evaluate(&relative(false));
+        assert!((got - 1.0).abs() < 1e-6, "{got}");
     }
 
     #[test]
@@ -190,8 +280,12 @@ mod tests {
     fn gradients_match_finite_differences() {
         check_loss_gradient(&Conformal);
         check_loss_gradient(&Stretch {
-            options: StretchOptions { area: AreaScale::Jacobian, signed: false },
+            options: StretchOptions { area: AreaScale::Jacobian, ..Default::default() },
         });
-        check_loss_gradient(&Stretch { options: StretchOptions { area: AreaScale::Jacobian, signed: true } });
+        check_loss_gradient(&Stretch {
+            options: StretchOptions { area: AreaScale::Jacobian, signed: true, ..Default::default() },
+        });
+        check_loss_gradient(&relative(false));
+        check_loss_gradient(&relative(true));
     }
 }
