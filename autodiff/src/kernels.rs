@@ -45,13 +45,40 @@ impl<'a> MatRef<'a> {
         }
     }
 
+    /// Rows `start .. start + count` of the view (no copy).
+    ///
+    /// # Panics
+    /// If the rows are out of range, or the view has a negative stride (views here never do).
+    pub fn row_range(self, start: usize, count: usize) -> Self {
+        assert!(start + count <= self.rows, "row_range: rows {start}+{count} of {}", self.rows);
+        let offset = if count == 0 { 0 } else { start * usize::try_from(self.row_stride).expect("stride") };
+        MatRef { data: &self.data[offset..], rows: count, ..self }
+    }
+
     /// The view, transposed when `transpose` is set.
     pub fn maybe_t(self, transpose: bool) -> Self {
         if transpose { self.t() } else { self }
     }
 }
 
+/// Products smaller than this many multiply-adds run on one thread: below it the fork/join
+/// overhead is comparable to the work.
+const PAR_GEMM_MIN_MACS: usize = 1 << 18;
+/// Products with fewer output rows than this are left to the `gemm` crate's own threading (which
+/// splits columns too); taller ones are split by rows here.
+const PAR_GEMM_MIN_ROWS: usize = 64;
+/// Row blocks of a split product start at multiples of this (the AVX-512 micro-kernel's height), so
+/// no block but the last runs the narrower tail kernels.
+const GEMM_ROW_ALIGN: usize = 32;
+
 /// `dst (m×n, row-major) = a·b` or, with `accumulate`, `dst += a·b`.
+///
+/// Threading: a large product with a tall output is split into one contiguous block of output rows
+/// per thread, each computed by a single-threaded `gemm` call. Every output element is then computed
+/// exactly as a single-threaded call computes it (the k order does not depend on the rows around it),
+/// so results are bit-identical for any thread count. This split measured ~25% faster than the
+/// crate's own threading for the weight-gradient shape `dW = Xᵀ·dY` (`256×5000 · 5000×256`) and equal
+/// for the forward shapes (BENCHMARKS.md, "GEMM threading").
 ///
 /// # Panics
 /// On inconsistent dimensions (a programming error).
@@ -68,14 +95,34 @@ pub(crate) fn gemm(dst: &mut [f32], a: MatRef<'_>, b: MatRef<'_>, accumulate: bo
         }
         return;
     }
-    let parallelism = if m * n * k >= 48 * 48 * 48 && rayon::current_num_threads() > 1 {
-        gemm::Parallelism::Rayon(0)
+    let threads = rayon::current_num_threads();
+    let parallel = threads > 1 && m * n * k >= PAR_GEMM_MIN_MACS;
+    if parallel && m >= PAR_GEMM_MIN_ROWS {
+        let rows_per_block = m.div_ceil(threads).next_multiple_of(GEMM_ROW_ALIGN);
+        dst.par_chunks_mut(rows_per_block * n).enumerate().for_each(|(block, d)| {
+            let rows = a.row_range(block * rows_per_block, d.len() / n);
+            gemm_call(d, rows, b, accumulate, gemm::Parallelism::None);
+        });
     } else {
-        gemm::Parallelism::None
-    };
-    // SAFETY: the views' strides and extents were built from slices holding exactly rows×cols
-    // elements (checked above for dst and by construction for the MatRefs), so every address gemm
-    // touches is inside its slice; dst does not alias a or b because it is a distinct &mut.
+        let parallelism = if parallel { gemm::Parallelism::Rayon(0) } else { gemm::Parallelism::None };
+        gemm_call(dst, a, b, accumulate, parallelism);
+    }
+}
+
+/// One call of the `gemm` crate on checked dimensions (`dst` is `a.rows × b.cols`, row-major).
+fn gemm_call(
+    dst: &mut [f32],
+    a: MatRef<'_>,
+    b: MatRef<'_>,
+    accumulate: bool,
+    parallelism: gemm::Parallelism,
+) {
+    let (m, k, n) = (a.rows, a.cols, b.cols);
+    debug_assert!(k == b.rows && dst.len() == m * n);
+    // SAFETY: the views' strides and extents were built from slices holding every element they
+    // address (by construction of the MatRefs, and `row_range` keeps that), dst holds exactly m×n
+    // (checked by the caller), so every address gemm touches is inside its slice; dst does not alias
+    // a or b because it is a distinct &mut.
     unsafe {
         gemm::gemm(
             m,
@@ -292,6 +339,33 @@ mod tests {
                 for (g, w) in got.iter().zip(&want) {
                     assert!((g - 2.0 * w).abs() < 2e-3);
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn split_gemm_is_exact_and_bit_identical_across_thread_counts() {
+        // Large enough for the row split (m·n·k ≥ PAR_GEMM_MIN_MACS, m ≥ PAR_GEMM_MIN_ROWS), with m
+        // not a multiple of the block alignment so the last block is a short one.
+        let (m, k, n) = (301, 97, 40);
+        assert!(m * n * k >= PAR_GEMM_MIN_MACS && m >= PAR_GEMM_MIN_ROWS);
+        let a: Vec<f32> = (0..m * k).map(|i| ((i * 7 % 13) as f32 - 6.0) / 5.0).collect();
+        let b: Vec<f32> = (0..k * n).map(|i| ((i * 5 % 11) as f32 - 5.0) / 4.0).collect();
+        let product = |threads: usize, ta: bool| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            let av =
+                if ta { MatRef::new(&a, Shape::new(k, m)).t() } else { MatRef::new(&a, Shape::new(m, k)) };
+            let mut out = vec![0.5; m * n];
+            pool.install(|| gemm(&mut out, av, MatRef::new(&b, Shape::new(k, n)), true));
+            (out, naive(av, MatRef::new(&b, Shape::new(k, n))))
+        };
+        for ta in [false, true] {
+            let (one, want) = product(1, ta);
+            for threads in [2, 3] {
+                assert!(product(threads, ta).0 == one, "{threads} threads differ from one (ta {ta})");
+            }
+            for (g, w) in one.iter().zip(&want) {
+                assert!((g - (w + 0.5)).abs() < 1e-3, "{g} vs {}", w + 0.5);
             }
         }
     }
