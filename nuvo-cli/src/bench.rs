@@ -47,7 +47,13 @@ enum What {
     Step,
 }
 
+/// Runs the cases on a rayon worker thread, as the trainer runs its steps (see `Trainer::step`), so
+/// the engine's kernels are timed as training uses them.
 pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
+    rayon::scope(|_| run_on_worker(args))
+}
+
+fn run_on_worker(args: &BenchArgs) -> anyhow::Result<()> {
     println!("threads: {}", rayon::current_num_threads());
     if args.what == What::Step {
         return step_case(args);
