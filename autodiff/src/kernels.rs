@@ -109,6 +109,28 @@ pub(crate) fn gemm(dst: &mut [f32], a: MatRef<'_>, b: MatRef<'_>, accumulate: bo
     }
 }
 
+/// `dst = a·b` (or `+=`) on the calling thread only: for callers that already split the work into
+/// blocks and run the blocks in parallel themselves.
+pub(crate) fn gemm_single_thread(dst: &mut [f32], a: MatRef<'_>, b: MatRef<'_>, accumulate: bool) {
+    assert_eq!(a.cols, b.rows, "gemm: inner dimensions {} and {} differ", a.cols, b.rows);
+    assert_eq!(dst.len(), a.rows * b.cols, "gemm: destination holds {} values", dst.len());
+    if dst.is_empty() {
+        return;
+    }
+    if a.cols == 0 {
+        if !accumulate {
+            dst.fill(0.0);
+        }
+        return;
+    }
+    gemm_call(dst, a, b, accumulate, gemm::Parallelism::None);
+}
+
+/// Whether a product of `macs` multiply-adds is worth spreading over the pool's threads.
+pub(crate) fn worth_parallel(macs: usize) -> bool {
+    macs >= PAR_GEMM_MIN_MACS && rayon::current_num_threads() > 1
+}
+
 /// One call of the `gemm` crate on checked dimensions (`dst` is `a.rows × b.cols`, row-major).
 fn gemm_call(
     dst: &mut [f32],
@@ -231,15 +253,27 @@ pub(crate) fn column_sums_dense(dst: &mut [f32], data: &[f32], cols: usize, accu
     debug_assert_eq!(dst.len(), cols);
     let rows = data.len().checked_div(cols).unwrap_or(0);
     let block = |b: usize| {
-        let mut acc = vec![0.0f64; cols];
         let end = ((b + 1) * REDUCE_BLOCK_ROWS).min(rows);
-        for row in data[b * REDUCE_BLOCK_ROWS * cols..end * cols].chunks_exact(cols) {
-            acc.iter_mut().zip(row).for_each(|(a, &v)| *a += v as f64);
-        }
-        acc
+        dense_block_sums(&data[b * REDUCE_BLOCK_ROWS * cols..end * cols], cols)
     };
     combine_column_blocks(dst, rows, accumulate, block);
 }
+
+/// The f64 column sums of one reduction block (`data` is at most [`REDUCE_BLOCK_ROWS`] rows of
+/// `cols`), summed row by row: what [`column_sums_dense`] computes per block, for callers that walk
+/// the same blocks themselves (see [`ROW_BLOCK`]).
+pub(crate) fn dense_block_sums(data: &[f32], cols: usize) -> Vec<f64> {
+    let mut acc = vec![0.0f64; cols];
+    for row in data.chunks_exact(cols) {
+        acc.iter_mut().zip(row).for_each(|(a, &v)| *a += v as f64);
+    }
+    acc
+}
+
+/// Rows per block of the fused row-block loops (the linear layer's forward and backward). Equal to
+/// the reduction block, so per-block column sums taken inside those loops are exactly the blocks
+/// [`column_sums_dense`] would sum, and [`combine_block_sums`] gives the same bits.
+pub(crate) const ROW_BLOCK: usize = REDUCE_BLOCK_ROWS;
 
 /// The shared half of the column sums: runs `block(b)` (the f64 column sums of rows
 /// `b·REDUCE_BLOCK_ROWS ..`) for every block, in parallel when large, and adds the blocks in a fixed
@@ -256,6 +290,11 @@ fn combine_column_blocks(
     } else {
         (0..blocks).map(block).collect()
     };
+    combine_block_sums(dst, &partials, accumulate);
+}
+
+/// Adds per-block f64 column sums into `dst` in block order (or overwrites, without `accumulate`).
+pub(crate) fn combine_block_sums(dst: &mut [f32], partials: &[Vec<f64>], accumulate: bool) {
     for (c, d) in dst.iter_mut().enumerate() {
         let s: f64 = partials.iter().map(|p| p[c]).sum();
         *d = if accumulate { *d + s as f32 } else { s as f32 };

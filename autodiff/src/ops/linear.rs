@@ -1,11 +1,21 @@
-//! The fused affine layer `act(x·W + b)`: one GEMM and one pass for bias and activation forward;
-//! one pass for the activation derivative and GEMMs straight into `dW` and `dx` backward.
+//! The fused affine layer `act(x·W + b)`.
+//!
+//! Both directions walk the batch in blocks of [`kernels::ROW_BLOCK`] rows, blocks in parallel, and
+//! finish each block while it is still in cache: forward, a block's GEMM then its bias and
+//! activation; backward, a block's activation derivative, its bias-gradient partial sums and its
+//! `dx` GEMM. Only `dW = xᵀ·dz`, which needs every row, runs as one separate GEMM. Separate
+//! whole-batch passes cost about as much memory traffic as the GEMMs' arithmetic at the MLP widths
+//! used here (BENCHMARKS.md, "Fused linear layer"). Every value is computed exactly as by the
+//! unfused passes (a block's GEMM rows equal the whole GEMM's; the bias sums use the reduction's
+//! own blocks), so the fusion changes no bits.
 
 use serde::{Deserialize, Serialize};
 
 use super::Op;
 use super::unary::sigmoid;
-use crate::kernels::{self, MatRef, gemm};
+use rayon::prelude::*;
+
+use crate::kernels::{self, MatRef, ROW_BLOCK, gemm, gemm_single_thread};
 use crate::shape::Shape;
 use crate::tape::{GradSink, Reader, Tape, Var};
 
@@ -58,13 +68,19 @@ impl Tape {
         }
         let shape = Shape::new(sx.rows, sw.cols);
         let mut out = self.pool.take(shape.len());
-        gemm(out.as_mut_slice(), MatRef::new(self.value(x), sx), MatRef::new(self.value(w), sw), false);
+        let (xv, wv) = (MatRef::new(self.value(x), sx), MatRef::new(self.value(w), sw));
         let bias = b.map(|b| self.value(b));
-        kernels::for_each_row(out.as_mut_slice(), shape.cols, |_, row| match bias {
-            Some(bias) => row.iter_mut().zip(bias).for_each(|(y, &b)| *y = act.apply(*y + b)),
-            None if act != Activation::Identity => row.iter_mut().for_each(|y| *y = act.apply(*y)),
-            None => {}
-        });
+        let finish_block = |first_row: usize, block: &mut [f32]| {
+            gemm_single_thread(block, xv.row_range(first_row, block.len() / shape.cols), wv, false);
+            for row in block.chunks_exact_mut(shape.cols) {
+                match bias {
+                    Some(bias) => row.iter_mut().zip(bias).for_each(|(y, &b)| *y = act.apply(*y + b)),
+                    None if act != Activation::Identity => row.iter_mut().for_each(|y| *y = act.apply(*y)),
+                    None => {}
+                }
+            }
+        };
+        for_each_row_block(out.as_mut_slice(), shape.cols, sx.rows * sx.cols * sw.cols, finish_block);
         let inputs = [x, w, b.unwrap_or(w)];
         self.push(Op::Linear { x, w, b, act }, shape, out, &inputs)
     }
@@ -82,21 +98,115 @@ pub(crate) fn backward(
     act: Activation,
 ) {
     let (sx, sw) = (r.shape(x), r.shape(w));
-    // dz = g ⊙ act'(y), in place.
-    if act != Activation::Identity {
-        kernels::update1(g, out, |g, y| g * act.derivative_from_output(y));
+    let cols = sw.cols;
+    if cols == 0 || sx.rows == 0 {
+        return; // no output: every gradient of this layer is empty or zero-rows
     }
-    let dz = MatRef::new(g, Shape::new(sx.rows, sw.cols));
-    if let Some(b) = b.filter(|&b| s.needs(b)) {
+    let wt = MatRef::new(r.value(w), sw).t();
+    let want_db = b.filter(|&b| s.needs(b));
+    let mut dx = (s.needs(x) && sx.cols > 0).then(|| s.slot(x));
+    // Per block: dz = g ⊙ act'(y) in place, the block's bias-gradient sums, and dx = dz·Wᵀ.
+    let block_sums = |g_block: &mut [f32], y_block: &[f32], dx_block: Option<(&mut [f32], bool)>| {
+        if act != Activation::Identity {
+            g_block.iter_mut().zip(y_block).for_each(|(g, &y)| *g *= act.derivative_from_output(y));
+        }
+        if let Some((dx_block, fresh)) = dx_block {
+            gemm_single_thread(
+                dx_block,
+                MatRef::new(g_block, Shape::new(g_block.len() / cols, cols)),
+                wt,
+                !fresh,
+            );
+        }
+        want_db.map(|_| kernels::dense_block_sums(g_block, cols))
+    };
+    // One job per block when worth it; otherwise one job for all blocks, on this thread.
+    let min_blocks_per_job = if kernels::worth_parallel(sx.rows * sx.cols * cols) { 1 } else { usize::MAX };
+    let (g_blocks, y_blocks) = (g.par_chunks_mut(ROW_BLOCK * cols), out.par_chunks(ROW_BLOCK * cols));
+    let partials: Vec<Option<Vec<f64>>> = match dx.as_mut() {
+        Some((dx, fresh)) => g_blocks
+            .zip(y_blocks)
+            .zip(dx.par_chunks_mut(ROW_BLOCK * sx.cols))
+            .with_min_len(min_blocks_per_job)
+            .map(|((g, y), d)| block_sums(g, y, Some((d, *fresh))))
+            .collect(),
+        None => g_blocks
+            .zip(y_blocks)
+            .with_min_len(min_blocks_per_job)
+            .map(|(g, y)| block_sums(g, y, None))
+            .collect(),
+    };
+    if let Some(b) = want_db {
+        let partials: Vec<Vec<f64>> = partials.into_iter().flatten().collect();
         let (db, fresh) = s.slot(b);
-        kernels::column_sums_dense(db, g, sw.cols, !fresh);
+        kernels::combine_block_sums(db, &partials, !fresh);
     }
     if s.needs(w) {
         let (dw, fresh) = s.slot(w);
+        let dz = MatRef::new(g, Shape::new(sx.rows, cols));
         gemm(dw, MatRef::new(r.value(x), sx).t(), dz, !fresh);
     }
-    if s.needs(x) {
-        let (dx, fresh) = s.slot(x);
-        gemm(dx, dz, MatRef::new(r.value(w), sw).t(), !fresh);
+}
+
+/// Runs `finish(first_row, block)` over consecutive blocks of [`ROW_BLOCK`] rows of `dst` (`cols`
+/// wide), blocks in parallel when the layer's `work` (multiply-adds) is worth it.
+fn for_each_row_block(dst: &mut [f32], cols: usize, work: usize, finish: impl Fn(usize, &mut [f32]) + Sync) {
+    if cols == 0 {
+        return;
+    }
+    let min_blocks_per_job = if kernels::worth_parallel(work) { 1 } else { usize::MAX };
+    dst.par_chunks_mut(ROW_BLOCK * cols)
+        .enumerate()
+        .with_min_len(min_blocks_per_job)
+        .for_each(|(i, block)| finish(i * ROW_BLOCK, block));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::tensor::Tensor;
+
+    fn filled(rows: usize, cols: usize, salt: usize) -> Tensor {
+        let v = (0..rows * cols).map(|i| (((i * 7919 + salt * 104_729) % 2003) as f32 - 1001.0) / 1001.0);
+        Tensor::from_vec(rows, cols, v.collect())
+    }
+
+    /// Gradients of `Σ r ⊙ layer(x, w, b)` for x, w, b; `fused` picks `Tape::linear` or the same layer
+    /// composed from unfused ops (`relu(x·w + 1·b)`).
+    fn gradients(fused: bool, threads: usize) -> Vec<Vec<f32>> {
+        let (rows, i, o) = (1100, 24, 40); // three row blocks, the last a short one
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| {
+            let mut t = Tape::default();
+            let x = t.leaf(&filled(rows, i, 1));
+            let w = t.leaf(&filled(i, o, 2));
+            let b = t.leaf(&filled(1, o, 3));
+            let y = if fused {
+                t.linear(x, w, Some(b), Activation::Relu)
+            } else {
+                let ones = t.constant(Shape::new(rows, 1), 1.0);
+                let (xw, bias) = (t.matmul(x, w), t.matmul(ones, b));
+                let z = t.add(xw, bias);
+                t.relu(z)
+            };
+            let r = t.input(&filled(rows, o, 4));
+            let weighted = t.mul(y, r);
+            let loss = t.sum_all(weighted);
+            t.backward(loss);
+            [x, w, b].iter().map(|&v| t.grad(v).unwrap().to_vec()).collect()
+        })
+    }
+
+    #[test]
+    fn blocked_layer_matches_unfused_ops_and_any_thread_count() {
+        let reference = gradients(false, 1);
+        let one = gradients(true, 1);
+        assert!(gradients(true, 2) == one, "two threads changed the bits");
+        for (name, (got, want)) in ["dx", "dw", "db"].iter().zip(one.iter().zip(&reference)) {
+            let scale = want.iter().fold(1.0f32, |m, v| m.max(v.abs()));
+            for (g, w) in got.iter().zip(want) {
+                assert!((g - w).abs() <= 1e-5 * scale, "{name}: {g} vs {w}");
+            }
+        }
     }
 }
