@@ -17,22 +17,7 @@ import argparse
 
 import numpy as np
 
-
-def read_obj(path):
-    verts, faces = [], []
-    with open(path) as f:
-        for line in f:
-            parts = line.split()
-            if not parts:
-                continue
-            if parts[0] == "v":
-                verts.append([float(x) for x in parts[1:4]])
-            elif parts[0] == "f":
-                idx = [int(p.split("/")[0]) for p in parts[1:]]
-                idx = [i - 1 if i > 0 else len(verts) + i for i in idx]
-                for k in range(1, len(idx) - 1):  # fan-triangulate polygons
-                    faces.append([idx[0], idx[k], idx[k + 1]])
-    return np.array(verts, dtype=np.float64), np.array(faces, dtype=np.int64)
+from objio import read_obj
 
 
 def smoothed(normals, centroids, radius, rounds=2):

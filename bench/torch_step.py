@@ -49,6 +49,8 @@ import torch
 import torch.nn.functional as F
 from scipy.spatial import cKDTree
 
+from objio import read_obj
+
 # The paper's default weights (`nuvo losses`).
 WEIGHTS = {"cycle_3d": 1.0, "cycle_2d": 1.0, "entropy": 0.04, "surface": 10.0,
            "cluster": 0.5, "conformal": 0.4, "stretch": 0.1, "texture": 0.1}
@@ -58,27 +60,12 @@ STEPS = 1000  # the bench config's training.steps: the cosine schedule's span
 LR = {"mlp": 1e-4, "sigma": 0.1, "grid": 0.04}
 
 
-def load_obj(path):
-    """Vertices and triangles of an OBJ (v and f lines only; polygons fan-triangulated)."""
-    verts, faces = [], []
-    with open(path) as f:
-        for line in f:
-            parts = line.split()
-            if not parts:
-                continue
-            if parts[0] == "v":
-                verts.append([float(c) for c in parts[1:4]])
-            elif parts[0] == "f":
-                idx = [int(p.split("/")[0]) - 1 for p in parts[1:]]
-                faces += [[idx[0], idx[k], idx[k + 1]] for k in range(1, len(idx) - 1)]
-    return np.asarray(verts, np.float32), np.asarray(faces, np.int64)
-
-
 class Surface:
     """The mesh in the model frame, with its area table and face normals."""
 
     def __init__(self, path):
-        v, f = load_obj(path)
+        v, f = read_obj(path)
+        v = v.astype(np.float32)
         used = v[np.unique(f)]  # bounding box of the referenced vertices (what our loader keeps)
         lo, hi = used.min(0), used.max(0)
         v = (v - 0.5 * (lo + hi)) / (0.5 * (hi - lo)).max() * 0.5  # canonical, then model frame
