@@ -83,47 +83,44 @@ const GEMM_ROW_ALIGN: usize = 32;
 /// # Panics
 /// On inconsistent dimensions (a programming error).
 pub(crate) fn gemm(dst: &mut [f32], a: MatRef<'_>, b: MatRef<'_>, accumulate: bool) {
+    if trivial_product(dst, a, b, accumulate) {
+        return;
+    }
     let (m, k, n) = (a.rows, a.cols, b.cols);
-    assert_eq!(k, b.rows, "gemm: inner dimensions {k} and {} differ", b.rows);
-    assert_eq!(dst.len(), m * n, "gemm: destination holds {} values, expected {m}×{n}", dst.len());
-    if m == 0 || n == 0 {
-        return;
-    }
-    if k == 0 {
-        if !accumulate {
-            dst.fill(0.0);
-        }
-        return;
-    }
-    let threads = rayon::current_num_threads();
-    let parallel = threads > 1 && m * n * k >= PAR_GEMM_MIN_MACS;
-    if parallel && m >= PAR_GEMM_MIN_ROWS {
-        let rows_per_block = m.div_ceil(threads).next_multiple_of(GEMM_ROW_ALIGN);
+    if !worth_parallel(m * k * n) {
+        gemm_call(dst, a, b, accumulate, gemm::Parallelism::None);
+    } else if m >= PAR_GEMM_MIN_ROWS {
+        let rows_per_block = m.div_ceil(rayon::current_num_threads()).next_multiple_of(GEMM_ROW_ALIGN);
         dst.par_chunks_mut(rows_per_block * n).enumerate().for_each(|(block, d)| {
             let rows = a.row_range(block * rows_per_block, d.len() / n);
             gemm_call(d, rows, b, accumulate, gemm::Parallelism::None);
         });
     } else {
-        let parallelism = if parallel { gemm::Parallelism::Rayon(0) } else { gemm::Parallelism::None };
-        gemm_call(dst, a, b, accumulate, parallelism);
+        gemm_call(dst, a, b, accumulate, gemm::Parallelism::Rayon(0));
     }
 }
 
 /// `dst = a·b` (or `+=`) on the calling thread only: for callers that already split the work into
 /// blocks and run the blocks in parallel themselves.
+///
+/// # Panics
+/// On inconsistent dimensions (a programming error).
 pub(crate) fn gemm_single_thread(dst: &mut [f32], a: MatRef<'_>, b: MatRef<'_>, accumulate: bool) {
-    assert_eq!(a.cols, b.rows, "gemm: inner dimensions {} and {} differ", a.cols, b.rows);
-    assert_eq!(dst.len(), a.rows * b.cols, "gemm: destination holds {} values", dst.len());
-    if dst.is_empty() {
-        return;
+    if !trivial_product(dst, a, b, accumulate) {
+        gemm_call(dst, a, b, accumulate, gemm::Parallelism::None);
     }
-    if a.cols == 0 {
-        if !accumulate {
-            dst.fill(0.0);
-        }
-        return;
+}
+
+/// Checks the dimensions and finishes the products that need no arithmetic (an empty output, or an
+/// empty inner dimension: zeros, or nothing to add); true when it did.
+fn trivial_product(dst: &mut [f32], a: MatRef<'_>, b: MatRef<'_>, accumulate: bool) -> bool {
+    let (m, k, n) = (a.rows, a.cols, b.cols);
+    assert_eq!(k, b.rows, "gemm: inner dimensions {k} and {} differ", b.rows);
+    assert_eq!(dst.len(), m * n, "gemm: destination holds {} values, expected {m}×{n}", dst.len());
+    if k == 0 && !accumulate {
+        dst.fill(0.0);
     }
-    gemm_call(dst, a, b, accumulate, gemm::Parallelism::None);
+    m == 0 || n == 0 || k == 0
 }
 
 /// Whether a product of `macs` multiply-adds is worth spreading over the pool's threads.
