@@ -596,6 +596,12 @@ impl ExperimentConfig {
             if w.enabled() && w.samples < self.model.charts {
                 return Err(src.invalid("warm_start.samples", "needs at least one sample per chart"));
             }
+            if w.occlusion && w.projection != crate::warm_start::Projection::Orthographic {
+                return Err(src.invalid(
+                    "warm_start.occlusion",
+                    "tests what an orthographic projection sees; set projection = \"orthographic\" or remove it",
+                ));
+            }
         }
         let out = &self.output;
         if !(16..=16384).contains(&out.atlas_resolution) {

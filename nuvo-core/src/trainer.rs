@@ -405,6 +405,7 @@ fn fit_warm_start(
         config.model.charts,
         cfg.projection,
         cfg.min_alignment,
+        cfg.occlusion,
     );
     Ok(Some((prior, cfg)))
 }

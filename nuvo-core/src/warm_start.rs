@@ -18,7 +18,11 @@
 //!   d(x)·a_i` (axes from these directions), `P_i` is Lambert's equal-area map of `d` about `a_i`,
 //!   `m_i(x) = [n(x)·d(x) > τ]` (seen from the centroid) within a little past the hemisphere;
 //!
-//! `τ = warm_start.min_alignment`. Each map is scaled uniformly (conformal) so the part it
+//! `τ = warm_start.min_alignment`. With `warm_start.occlusion` (orthographic only), `m_i(x)` also
+//! requires that chart `i` *sees* `x`: a depth map of the fitting samples along `a_i` (the front-most
+//! depth per cell of the projection plane) has nothing in front of `x` beyond what `x`'s own surface
+//! reaches within the cell, and `ℓ(x)` is the best-facing chart among those that see `x` (the
+//! best-facing of all when none does). Each map is scaled uniformly (conformal) so the part it
 //! supervises fills the middle 90% of the square. The prior's weight falls linearly from `warm_start.weight` to 0, while every configured loss runs as
 //! usual (the cycle losses teach `s_i` to invert the projection). Not in the paper: it is off
 //! unless a config has a `[warm_start]` table with `steps > 0`.
@@ -47,6 +51,12 @@ pub struct WarmStartConfig {
     pub min_alignment: f32,
     /// Surface samples drawn once to fit the axes and the projections' extents.
     pub samples: usize,
+    /// Orthographic only: a chart's projection supervises only the points it sees, not those hidden
+    /// behind another part of the surface along its axis (a depth map of the fitting samples), and a
+    /// point starts in the chart it faces most among those that see it. Without it, two parts facing
+    /// the same way, one behind the other (the bunny's ears seen edge-on), get the same target UVs
+    /// and start overlapping.
+    pub occlusion: bool,
 }
 
 impl Default for WarmStartConfig {
@@ -57,6 +67,7 @@ impl Default for WarmStartConfig {
             projection: Projection::Orthographic,
             min_alignment: 0.3,
             samples: 20_000,
+            occlusion: false,
         }
     }
 }
@@ -157,6 +168,8 @@ pub struct ProjectionPrior {
     center: [f32; 3],
     frames: Vec<ChartFrame>,
     min_alignment: f32,
+    /// One per chart when occlusion is tested (orthographic maps with `occlusion`), else empty.
+    depth_maps: Vec<DepthMap>,
 }
 
 /// Rounds of spherical k-means that adapt the starting axes to the normals.
@@ -167,7 +180,8 @@ const KMEANS_ROUNDS: usize = 10;
 const AZIMUTHAL_REACH: f32 = 0.2;
 
 impl ProjectionPrior {
-    /// Fits `charts` maps to surface samples (model frame) and their unit normals.
+    /// Fits `charts` maps to surface samples (model frame) and their unit normals; with
+    /// `occlusion` (orthographic maps only), also each chart's depth map of the samples.
     /// Deterministic; `points` and `normals` must have equal lengths.
     pub fn fit(
         points: &[[f32; 3]],
@@ -175,13 +189,15 @@ impl ProjectionPrior {
         charts: usize,
         projection: Projection,
         min_alignment: f32,
+        occlusion: bool,
     ) -> Self {
         debug_assert_eq!(points.len(), normals.len());
         let count = points.len().max(1) as f32;
         let center = points
             .iter()
             .fold([0.0f32; 3], |c, p| [c[0] + p[0] / count, c[1] + p[1] / count, c[2] + p[2] / count]);
-        let mut prior = ProjectionPrior { projection, center, frames: Vec::new(), min_alignment };
+        let mut prior =
+            ProjectionPrior { projection, center, frames: Vec::new(), min_alignment, depth_maps: Vec::new() };
         let keys: Vec<[f32; 3]> = points.iter().zip(normals).map(|(x, n)| prior.key(x, n)).collect();
         let mut axes = starting_axes(points, &keys, charts);
         for _ in 0..KMEANS_ROUNDS {
@@ -196,6 +212,13 @@ impl ProjectionPrior {
             }
         }
         prior.frames = axes.iter().map(|&axis| ChartFrame::new(axis)).collect();
+        if occlusion && projection == Projection::Orthographic {
+            prior.depth_maps = (0..charts)
+                .map(|i| {
+                    DepthMap::new(points.iter().map(|x| (prior.planar(i, x), dot(x, &prior.frames[i].axis))))
+                })
+                .collect();
+        }
         for i in 0..charts {
             let supervised = points.iter().zip(normals).filter(|(x, n)| prior.supervises(i, x, n));
             let planar: Vec<[f32; 2]> = supervised.map(|(x, _)| prior.planar(i, x)).collect();
@@ -241,7 +264,7 @@ impl ProjectionPrior {
     fn supervises(&self, i: usize, x: &[f32; 3], n: &[f32; 3]) -> bool {
         let axis = &self.frames[i].axis;
         match self.projection {
-            Projection::Orthographic => dot(n, axis) > self.min_alignment,
+            Projection::Orthographic => dot(n, axis) > self.min_alignment && self.sees(i, x, n),
             Projection::Azimuthal => {
                 let d = self.direction(x);
                 dot(&d, axis) > -AZIMUTHAL_REACH && dot(n, &d) > self.min_alignment
@@ -255,9 +278,31 @@ impl ProjectionPrior {
     }
 
     /// The chart point `x` with normal `n` starts in: the one whose axis its normal (orthographic)
-    /// or its direction from the centroid (azimuthal) faces most.
+    /// or its direction from the centroid (azimuthal) faces most; with depth maps, the one it faces
+    /// most among the charts that see it (all of them when none does).
     pub fn label(&self, x: &[f32; 3], n: &[f32; 3]) -> usize {
-        best_axis(self.frames.iter().map(|f| f.axis), &self.key(x, n))
+        let key = self.key(x, n);
+        if self.depth_maps.is_empty() {
+            return best_axis(self.frames.iter().map(|f| f.axis), &key);
+        }
+        let seen =
+            (0..self.frames.len()).filter(|&i| dot(&key, &self.frames[i].axis) > 0.0 && self.sees(i, x, n));
+        let best_seen = seen.max_by(|&i, &j| {
+            let (a, b) = (dot(&key, &self.frames[i].axis), dot(&key, &self.frames[j].axis));
+            a.total_cmp(&b).then(i.cmp(&j))
+        });
+        best_seen.unwrap_or_else(|| best_axis(self.frames.iter().map(|f| f.axis), &key))
+    }
+
+    /// Whether chart `i`'s projection sees `x` (normal `n`): not hidden behind other samples along
+    /// its axis. Always true without depth maps.
+    fn sees(&self, i: usize, x: &[f32; 3], n: &[f32; 3]) -> bool {
+        let Some(map) = self.depth_maps.get(i) else { return true };
+        let axis = &self.frames[i].axis;
+        let facing = dot(n, axis);
+        let slope =
+            if facing > 0.0 { (1.0 - facing * facing).max(0.0).sqrt() / facing } else { f32::INFINITY };
+        map.sees(self.planar(i, x), dot(x, axis), slope)
     }
 
     /// Chart `i`'s target UV for point `x`.
@@ -305,6 +350,63 @@ impl ProjectionPrior {
         let fit = tape.sum_all(fit);
         let total = tape.add(ce, fit);
         tape.scale(total, 1.0 / b.max(1) as f32)
+    }
+}
+
+/// Cells per side of a chart's depth map, over the planar extent of the fitting samples: with the
+/// default 20,000 samples, a few front-most samples per cell on the bunny.
+const DEPTH_CELLS: usize = 64;
+
+/// The steepest surface (depth change per planar distance) whose own depth spread inside a cell is
+/// tolerated in full; steeper points get this much tolerance.
+const MAX_SLOPE: f32 = 4.0;
+
+/// The front of the samples seen along a chart's axis: per cell of its projection plane, the
+/// largest depth `x·a` of a sample projecting there (a z-buffer of points).
+#[derive(Clone, Debug, PartialEq)]
+struct DepthMap {
+    lo: [f32; 2],
+    cell: f32,
+    /// Row-major `DEPTH_CELLS²`; `−∞` where no sample fell.
+    front: Vec<f32>,
+}
+
+impl DepthMap {
+    /// The map of samples given as (planar position, depth).
+    fn new(samples: impl Iterator<Item = ([f32; 2], f32)> + Clone) -> Self {
+        let (mut lo, mut hi) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
+        for (q, _) in samples.clone() {
+            for k in 0..2 {
+                lo[k] = lo[k].min(q[k]);
+                hi[k] = hi[k].max(q[k]);
+            }
+        }
+        let extent = (hi[0] - lo[0]).max(hi[1] - lo[1]);
+        let cell = if extent.is_finite() && extent > 0.0 { extent / DEPTH_CELLS as f32 } else { 1.0 };
+        let mut map = DepthMap { lo, cell, front: vec![f32::NEG_INFINITY; DEPTH_CELLS * DEPTH_CELLS] };
+        for (q, depth) in samples {
+            if let Some(c) = map.cell_index(q) {
+                map.front[c] = map.front[c].max(depth);
+            }
+        }
+        map
+    }
+
+    fn cell_index(&self, q: [f32; 2]) -> Option<usize> {
+        let at = |k: usize| {
+            let c = ((q[k] - self.lo[k]) / self.cell).floor();
+            (c >= 0.0 && c <= DEPTH_CELLS as f32).then(|| (c as usize).min(DEPTH_CELLS - 1))
+        };
+        Some(at(0)? * DEPTH_CELLS + at(1)?)
+    }
+
+    /// Whether a point at planar `q` and depth `depth`, on a surface whose depth changes by `slope`
+    /// per unit of planar distance, is at the front of its cell: no sample there lies further in
+    /// front than its own surface can reach within the cell (plus half a cell).
+    fn sees(&self, q: [f32; 2], depth: f32, slope: f32) -> bool {
+        let Some(c) = self.cell_index(q) else { return true };
+        let reach = (slope.min(MAX_SLOPE) * std::f32::consts::SQRT_2 + 0.5) * self.cell;
+        self.front[c] <= depth + reach
     }
 }
 
@@ -391,7 +493,7 @@ mod tests {
     #[test]
     fn six_charts_on_a_box_take_its_face_normals_as_axes() {
         let (p, n) = cube_samples();
-        let prior = ProjectionPrior::fit(&p, &n, 6, Projection::Orthographic, 0.3);
+        let prior = ProjectionPrior::fit(&p, &n, 6, Projection::Orthographic, 0.3, false);
         let mut found: Vec<[i32; 3]> = prior.axes().iter().map(|a| a.map(|c| c.round() as i32)).collect();
         found.sort();
         let mut want = vec![[-1, 0, 0], [1, 0, 0], [0, -1, 0], [0, 1, 0], [0, 0, -1], [0, 0, 1]];
@@ -405,7 +507,7 @@ mod tests {
     #[test]
     fn each_face_projects_into_the_middle_of_the_square_with_its_own_orientation() {
         let (p, n) = cube_samples();
-        let prior = ProjectionPrior::fit(&p, &n, 6, Projection::Orthographic, 0.3);
+        let prior = ProjectionPrior::fit(&p, &n, 6, Projection::Orthographic, 0.3, false);
         for (x, nx) in p.iter().zip(&n) {
             let i = prior.label(x, nx);
             let uv = prior.target_uv(i, x);
@@ -442,7 +544,7 @@ mod tests {
             .filter(|(k, (_, nx))| nx[1] != 0.0 || k % 10 == 0)
             .map(|(_, (x, nx))| ([x[0], x[1] * 0.1, x[2]], nx))
             .unzip();
-        let prior = ProjectionPrior::fit(&p, &n, 2, Projection::Orthographic, 0.3);
+        let prior = ProjectionPrior::fit(&p, &n, 2, Projection::Orthographic, 0.3, false);
         let ys: Vec<f32> = prior.axes().iter().map(|a| a[1]).collect();
         assert!(ys.iter().any(|&y| y > 0.7) && ys.iter().any(|&y| y < -0.7), "{:?}", prior.axes());
     }
@@ -462,7 +564,7 @@ mod tests {
                 (x, d)
             })
             .unzip();
-        let prior = ProjectionPrior::fit(&p, &n, 2, Projection::Azimuthal, 0.3);
+        let prior = ProjectionPrior::fit(&p, &n, 2, Projection::Azimuthal, 0.3, false);
         let [a0, a1] = [prior.axes()[0], prior.axes()[1]];
         assert!(dot(&a0, &a1) < -0.99, "two charts look in opposite directions: {a0:?} {a1:?}");
         for (chart, f) in prior.frames.iter().enumerate() {
@@ -485,6 +587,49 @@ mod tests {
             assert!(uv.iter().all(|&c| (0.0..=1.0).contains(&c)), "{uv:?}");
         }
         assert!(per_chart.iter().all(|&k| k.abs_diff(count / 2) < count / 20), "{per_chart:?}");
+    }
+
+    /// Two unit squares facing +z, one at z = 0.2 in front of the other at z = −0.2 and shifted by
+    /// half a side in x: samples on grids.
+    fn occluding_squares() -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
+        let (mut p, mut n) = (Vec::new(), Vec::new());
+        let g = 40;
+        let at = |i: usize| (i as f32 + 0.5) / g as f32 - 0.5;
+        for i in 0..g {
+            for j in 0..g {
+                p.push([at(i) + 0.25, at(j), 0.2]);
+                n.push([0.0, 0.0, 1.0]);
+                p.push([at(i) - 0.25, at(j), -0.2]);
+                n.push([0.0, 0.0, 1.0]);
+            }
+        }
+        (p, n)
+    }
+
+    #[test]
+    fn with_occlusion_a_chart_supervises_only_what_it_sees() {
+        let (p, n) = occluding_squares();
+        let plain = ProjectionPrior::fit(&p, &n, 1, Projection::Orthographic, 0.3, false);
+        let aware = ProjectionPrior::fit(&p, &n, 1, Projection::Orthographic, 0.3, true);
+        assert!(aware.axes()[0][2] > 0.99, "the chart looks along +z: {:?}", aware.axes());
+        let z = 0;
+        let (mut hidden, mut shown, mut front_kept) = (0, 0, true);
+        for (x, nx) in p.iter().zip(&n) {
+            assert!(plain.supervises(z, x, nx), "without occlusion every facing point is supervised");
+            let behind = x[2] < 0.0 && x[0] > -0.25 + 0.03; // the back square under the front one
+            let clear = x[2] < 0.0 && x[0] < -0.25 - 0.03; // the part of it nothing covers
+            if x[2] > 0.0 {
+                front_kept &= aware.supervises(z, x, nx);
+            } else if behind {
+                hidden += usize::from(!aware.supervises(z, x, nx));
+            } else if clear {
+                shown += usize::from(aware.supervises(z, x, nx));
+            }
+        }
+        assert!(front_kept, "the front square is seen everywhere");
+        // 40 × 40 grid: the covered half of the back square is 0.5 − 0.03 of its width.
+        assert!(hidden >= 40 * 18, "only {hidden} covered points hidden");
+        assert!(shown >= 40 * 18, "only {shown} uncovered points of the back square seen");
     }
 
     #[test]

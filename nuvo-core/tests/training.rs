@@ -415,6 +415,7 @@ fn warm_start_mistakes_are_located() {
         ("[warm_start]\nmin_alignment = 1.5\n", "warm_start.min_alignment"),
         ("[warm_start]\nweight = -1\n", "warm_start.weight"),
         ("[warm_start]\nstep = 3\n", "warm_start.step"),
+        ("[warm_start]\nprojection = \"azimuthal\"\nocclusion = true\n", "warm_start.occlusion"),
     ] {
         let err = config::from_str("w.toml", &format!("{SMALL}{text}")).unwrap_err().to_string();
         assert!(err.contains(key), "{err}");
