@@ -138,14 +138,7 @@ impl ChartFrame {
     /// Scales and offsets the map so the planar points it supervises fill the middle 90% of the
     /// square (keeping the aspect ratio). Leaves the frame alone when there are none.
     fn fit_extent(&mut self, planar: impl Iterator<Item = [f32; 2]>) {
-        let (mut lo, mut hi) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
-        for q in planar {
-            for k in 0..2 {
-                lo[k] = lo[k].min(q[k]);
-                hi[k] = hi[k].max(q[k]);
-            }
-        }
-        let extent = (hi[0] - lo[0]).max(hi[1] - lo[1]);
+        let (lo, hi, extent) = planar_bounds(planar);
         if !(extent.is_finite() && extent > 0.0) {
             return;
         }
@@ -154,6 +147,18 @@ impl ChartFrame {
             self.origin[k] = 0.5 - self.scale * 0.5 * (lo[k] + hi[k]);
         }
     }
+}
+
+/// The bounding box `(lo, hi)` of planar points and its longer side (`−∞` when there are none).
+fn planar_bounds(planar: impl Iterator<Item = [f32; 2]>) -> ([f32; 2], [f32; 2], f32) {
+    let (mut lo, mut hi) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
+    for q in planar {
+        for k in 0..2 {
+            lo[k] = lo[k].min(q[k]);
+            hi[k] = hi[k].max(q[k]);
+        }
+    }
+    (lo, hi, (hi[0] - lo[0]).max(hi[1] - lo[1]))
 }
 
 fn dot(a: &[f32; 3], b: &[f32; 3]) -> f32 {
@@ -374,14 +379,7 @@ struct DepthMap {
 impl DepthMap {
     /// The map of samples given as (planar position, depth).
     fn new(samples: impl Iterator<Item = ([f32; 2], f32)> + Clone) -> Self {
-        let (mut lo, mut hi) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
-        for (q, _) in samples.clone() {
-            for k in 0..2 {
-                lo[k] = lo[k].min(q[k]);
-                hi[k] = hi[k].max(q[k]);
-            }
-        }
-        let extent = (hi[0] - lo[0]).max(hi[1] - lo[1]);
+        let (lo, _, extent) = planar_bounds(samples.clone().map(|(q, _)| q));
         let cell = if extent.is_finite() && extent > 0.0 { extent / DEPTH_CELLS as f32 } else { 1.0 };
         let mut map = DepthMap { lo, cell, front: vec![f32::NEG_INFINITY; DEPTH_CELLS * DEPTH_CELLS] };
         for (q, depth) in samples {

@@ -106,7 +106,7 @@ pub(crate) fn backward(
     let want_db = b.filter(|&b| s.needs(b));
     let mut dx = (s.needs(x) && sx.cols > 0).then(|| s.slot(x));
     // Per block: dz = g ⊙ act'(y) in place, the block's bias-gradient sums, and dx = dz·Wᵀ.
-    let block_sums = |g_block: &mut [f32], y_block: &[f32], dx_block: Option<(&mut [f32], bool)>| {
+    let finish_block = |g_block: &mut [f32], y_block: &[f32], dx_block: Option<(&mut [f32], bool)>| {
         if act != Activation::Identity {
             g_block.iter_mut().zip(y_block).for_each(|(g, &y)| *g *= act.derivative_from_output(y));
         }
@@ -120,21 +120,16 @@ pub(crate) fn backward(
         }
         want_db.map(|_| kernels::dense_block_sums(g_block, cols))
     };
-    // One job per block when worth it; otherwise one job for all blocks, on this thread.
-    let min_blocks_per_job = if kernels::worth_parallel(sx.rows * sx.cols * cols) { 1 } else { usize::MAX };
+    let per_job = min_blocks_per_job(sx.rows * sx.cols * cols);
     let (g_blocks, y_blocks) = (g.par_chunks_mut(ROW_BLOCK * cols), out.par_chunks(ROW_BLOCK * cols));
     let partials: Vec<Option<Vec<f64>>> = match dx.as_mut() {
         Some((dx, fresh)) => g_blocks
             .zip(y_blocks)
             .zip(dx.par_chunks_mut(ROW_BLOCK * sx.cols))
-            .with_min_len(min_blocks_per_job)
-            .map(|((g, y), d)| block_sums(g, y, Some((d, *fresh))))
+            .with_min_len(per_job)
+            .map(|((g, y), d)| finish_block(g, y, Some((d, *fresh))))
             .collect(),
-        None => g_blocks
-            .zip(y_blocks)
-            .with_min_len(min_blocks_per_job)
-            .map(|(g, y)| block_sums(g, y, None))
-            .collect(),
+        None => g_blocks.zip(y_blocks).with_min_len(per_job).map(|(g, y)| finish_block(g, y, None)).collect(),
     };
     if let Some(b) = want_db {
         let partials: Vec<Vec<f64>> = partials.into_iter().flatten().collect();
@@ -154,11 +149,16 @@ fn for_each_row_block(dst: &mut [f32], cols: usize, work: usize, finish: impl Fn
     if cols == 0 {
         return;
     }
-    let min_blocks_per_job = if kernels::worth_parallel(work) { 1 } else { usize::MAX };
     dst.par_chunks_mut(ROW_BLOCK * cols)
         .enumerate()
-        .with_min_len(min_blocks_per_job)
+        .with_min_len(min_blocks_per_job(work))
         .for_each(|(i, block)| finish(i * ROW_BLOCK, block));
+}
+
+/// The row blocks per rayon job for a layer of `work` multiply-adds: one job per block when that is
+/// worth it, otherwise one job for all blocks, run on this thread.
+fn min_blocks_per_job(work: usize) -> usize {
+    if kernels::worth_parallel(work) { 1 } else { usize::MAX }
 }
 
 #[cfg(test)]
