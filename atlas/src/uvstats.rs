@@ -12,6 +12,11 @@
 //!   area in the chart (ties: counter-clockwise). `flipped_fraction` = flipped faces / all faces.
 //!   This assumes the 3-D winding is consistent inside a chart, as it is for every mesh in the test
 //!   data (a winding error inside a chart would show up as a flip).
+//! - **Creased face**: a face sharing a mesh edge with a face whose unit normal makes an angle of
+//!   more than 90° with its own (the surface turns back on itself there). A UV map that is a smooth
+//!   function of 3-D position, as Nuvo's is, can hardly keep both sides of such a crease the same
+//!   way round when the crease is smaller than the sample spacing, so `flipped_on_creases` counts
+//!   the flips that the input mesh, rather than the map, explains.
 //! - **UV raster**: the unit square `[0,1]²` split into `R × R` texels, a texel covered by a face
 //!   when its centre is (rasteriser coverage rule: a centre on an edge shared by two faces belongs
 //!   to exactly one, so shared edges never count as overlap). UV outside `[0,1]²` is not counted.
@@ -26,7 +31,7 @@ use serde::Serialize;
 
 use crate::error::AtlasError;
 use crate::raster::{Tri2, raster_parallel, rasterize_triangle};
-use crate::vecmath::{cross, norm, signed_area2_2d, sub, v3};
+use crate::vecmath::{cross, dot, norm, signed_area2_2d, sub, v3};
 
 /// UV area at or below which a face counts as degenerate in UV (not flipped, not measurable).
 pub const DEGENERATE_UV_AREA: f64 = 1e-12;
@@ -54,6 +59,8 @@ pub struct UvStats {
     pub flipped_faces: usize,
     /// `flipped_faces / faces`.
     pub flipped_fraction: f64,
+    /// Flipped faces that are creased (module docs): folds of the input surface, not of the map.
+    pub flipped_on_creases: usize,
     /// Faces of (near) zero UV area.
     pub degenerate_uv_faces: usize,
     /// Faces of (near) zero 3-D area.
@@ -109,6 +116,8 @@ pub fn analyse_uv(
     let area2 = signed_uv_area2(uv);
     let degenerate_uv: Vec<u32> = ids(area2.iter().map(|a| a.abs() * 0.5 <= DEGENERATE_UV_AREA));
     let flipped = flipped_faces(&area2, &face_chart, charts);
+    let creased = creased_faces(mesh);
+    let flipped_on_creases = flipped.iter().filter(|&&f| creased[f as usize]).count();
     let counts = uv_coverage(uv, resolution);
     let overlapping = overlapping_faces(uv, &counts, resolution);
     let covered = counts.iter().filter(|&&c| c >= 1).count();
@@ -122,6 +131,7 @@ pub fn analyse_uv(
         overlapping_faces: overlapping.len(),
         flipped_faces: flipped.len(),
         flipped_fraction: if faces == 0 { 0.0 } else { flipped.len() as f64 / faces as f64 },
+        flipped_on_creases,
         degenerate_uv_faces: degenerate_uv.len(),
         degenerate_3d_faces: degenerate_3d_faces(mesh).iter().filter(|&&d| d).count(),
         raster_resolution: resolution,
@@ -132,26 +142,16 @@ pub fn analyse_uv(
 /// UV-connected components of the faces (module docs): `(chart of each face, number of charts)`,
 /// charts numbered in order of their first face.
 pub fn uv_charts(mesh: &TriMesh, uv: &UvLayer) -> (Vec<u32>, usize) {
-    // (edge key, face, uv at the lower vertex, uv at the higher vertex), sorted by key.
-    let mut edges: Vec<EdgeUse> = Vec::with_capacity(mesh.triangles.len() * 3);
-    for (f, (t, tu)) in mesh.triangles.iter().zip(&uv.triangles).enumerate() {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            let (ua, ub) = (uv.coords[tu[k] as usize], uv.coords[tu[(k + 1) % 3] as usize]);
-            match a.cmp(&b) {
-                std::cmp::Ordering::Less => edges.push(((a, b), f as u32, ua, ub)),
-                std::cmp::Ordering::Greater => edges.push(((b, a), f as u32, ub, ua)),
-                std::cmp::Ordering::Equal => {} // a collapsed edge connects nothing
-            }
-        }
-    }
-    edges.par_sort_unstable_by_key(|e| (e.0, e.1));
+    // Two uses of an edge join their faces when both ends have the same UVs in both faces.
+    let uv_at =
+        |e: &EdgeUse, end: usize| uv.coords[uv.triangles[e.face as usize][e.corners[end] as usize] as usize];
+    let edges = edge_uses(mesh);
     let mut dsu = Dsu::new(mesh.triangles.len());
-    for group in edges.chunk_by(|x, y| x.0 == y.0) {
+    for group in edges.chunk_by(|x, y| x.key == y.key) {
         for (i, x) in group.iter().enumerate() {
             for y in &group[i + 1..] {
-                if x.2 == y.2 && x.3 == y.3 {
-                    dsu.union(x.1, y.1);
+                if uv_at(x, 0) == uv_at(y, 0) && uv_at(x, 1) == uv_at(y, 1) {
+                    dsu.union(x.face, y.face);
                 }
             }
         }
@@ -170,9 +170,57 @@ pub fn uv_charts(mesh: &TriMesh, uv: &UvLayer) -> (Vec<u32>, usize) {
     (out, count as usize)
 }
 
-/// One face's use of a mesh edge: (sorted vertex pair, face, UV at the lower vertex, UV at the
-/// higher vertex).
-type EdgeUse = ((u32, u32), u32, [f32; 2], [f32; 2]);
+/// Whether each face is creased (module docs): it shares an edge with a face whose normal points
+/// more than 90° away from its own. Faces of zero 3-D area have no normal and crease nothing.
+pub fn creased_faces(mesh: &TriMesh) -> Vec<bool> {
+    let normals: Vec<[f64; 3]> = (0..mesh.triangles.len())
+        .into_par_iter()
+        .map(|f| {
+            let [a, b, c] = mesh.corners(f).map(v3);
+            cross(sub(b, a), sub(c, a))
+        })
+        .collect();
+    let mut creased = vec![false; mesh.triangles.len()];
+    for group in edge_uses(mesh).chunk_by(|x, y| x.key == y.key) {
+        for (i, x) in group.iter().enumerate() {
+            for y in &group[i + 1..] {
+                if dot(normals[x.face as usize], normals[y.face as usize]) < 0.0 {
+                    creased[x.face as usize] = true;
+                    creased[y.face as usize] = true;
+                }
+            }
+        }
+    }
+    creased
+}
+
+/// One face's use of a mesh edge: the edge's sorted vertex pair, the face, and the face's corners
+/// at the lower and the higher vertex.
+struct EdgeUse {
+    key: (u32, u32),
+    face: u32,
+    corners: [u8; 2],
+}
+
+/// Every use of every non-collapsed edge, sorted by (edge, face) so the uses of one edge are
+/// adjacent and their order does not depend on the thread count.
+fn edge_uses(mesh: &TriMesh) -> Vec<EdgeUse> {
+    let mut edges: Vec<EdgeUse> = Vec::with_capacity(mesh.triangles.len() * 3);
+    for (f, t) in mesh.triangles.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            let (k, l) = (k as u8, ((k + 1) % 3) as u8);
+            let (key, corners) = match a.cmp(&b) {
+                std::cmp::Ordering::Less => ((a, b), [k, l]),
+                std::cmp::Ordering::Greater => ((b, a), [l, k]),
+                std::cmp::Ordering::Equal => continue, // a collapsed edge connects nothing
+            };
+            edges.push(EdgeUse { key, face: f as u32, corners });
+        }
+    }
+    edges.par_sort_unstable_by_key(|e| (e.key, e.face));
+    edges
+}
 
 /// Twice the signed UV area of every face.
 pub(crate) fn signed_uv_area2(uv: &UvLayer) -> Vec<f64> {
@@ -326,6 +374,39 @@ mod tests {
         // The folded strip covers 1/3 of the used UV area twice.
         assert!((a.stats.overlap_fraction - 1.0 / 3.0).abs() < 0.02, "{}", a.stats.overlap_fraction);
         assert!(a.stats.overlapping_faces >= m.triangles.len() / 2);
+    }
+
+    #[test]
+    fn flips_on_a_crease_of_the_surface_are_counted_apart() {
+        // A 4×4 grid in the plane z = 0, then the column of faces right of x = 0.5 folded back
+        // over it by 150° about the line x = 0.5 (normals −0.87 apart: a crease). The UVs are the
+        // straight projection (x, y), so the folded column lands mirrored on the column beside it:
+        // its 8 faces are flipped. Creased are the faces across the 4 edges on the crease line,
+        // one on each side of each edge; 4 of them are folded ones.
+        let mut m = grid(4, |p| [(p[0] + 1.0) * 0.5, (p[1] + 1.0) * 0.5]);
+        let (c, s) = (150f32.to_radians().cos(), 150f32.to_radians().sin());
+        for p in &mut m.positions {
+            if p[0] > 0.5 {
+                let d = p[0] - 0.5;
+                *p = [0.5 + d * c, p[1], d * s];
+            }
+        }
+        let uv = m.uv.as_mut().unwrap();
+        uv.coords = m.positions.iter().map(|p| [(p[0] + 1.0) * 0.5, (p[1] + 1.0) * 0.5]).collect();
+        let creased = creased_faces(&m);
+        let a = analyse_uv(&m, None, 64).unwrap();
+        assert_eq!(creased.iter().filter(|&&c| c).count(), 8);
+        for f in (0..m.triangles.len()).filter(|&f| creased[f]) {
+            let on_line = m.triangles[f].iter().filter(|&&v| m.positions[v as usize][0] == 0.5).count();
+            assert_eq!(on_line, 2, "creased face {f} has its edge on the crease line");
+        }
+        assert_eq!(a.stats.flipped_faces, 8, "the folded column");
+        assert_eq!(a.stats.flipped_on_creases, 4);
+        // The same fold in UV on a flat surface (the test above) has no crease to blame.
+        let flat = grid(8, |p| [(p[0] - 0.5).abs() * 0.6, (p[1] + 1.0) * 0.5]);
+        let a = analyse_uv(&flat, None, 64).unwrap();
+        assert!(a.stats.flipped_faces > 0);
+        assert_eq!(a.stats.flipped_on_creases, 0);
     }
 
     #[test]

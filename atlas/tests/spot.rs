@@ -41,6 +41,7 @@ fn spot_gets_sensible_metrics_at_the_defaults() {
     assert!((i.editability - expected).abs() < 1e-12);
     assert_eq!(m.uv.charts, 13);
     assert_eq!(m.uv.flipped_faces, 1);
+    assert_eq!(m.uv.flipped_on_creases, 0, "spot has no creases: its flip is in the UVs");
     assert_eq!(m.uv.degenerate_uv_faces, 0);
     assert_eq!(m.uv.degenerate_3d_faces, 0);
     assert!(m.uv.overlap_fraction < 1e-3, "spot's charts do not overlap: {}", m.uv.overlap_fraction);

@@ -85,7 +85,7 @@ pub fn table(r: &EvalReport) -> String {
         o.resolution,
         o.seed
     );
-    let rows: [(&str, String); 10] = [
+    let rows: [(&str, String); 11] = [
         ("Boundary", format!("{:.4}", m.boundary)),
         ("Stretch", format!("{:.4}", m.stretch)),
         ("Conformal", format!("{:.4}", m.conformal)),
@@ -94,6 +94,7 @@ pub fn table(r: &EvalReport) -> String {
         ("UV utilisation", format!("{:.4}", uv.utilisation)),
         ("UV overlap", format!("{:.4} ({} faces)", uv.overlap_fraction, uv.overlapping_faces)),
         ("flipped faces", format!("{:.4} ({} faces)", uv.flipped_fraction, uv.flipped_faces)),
+        ("  on mesh creases", format!("{} of them (the surface turns back there)", uv.flipped_on_creases)),
         ("degenerate UV faces", uv.degenerate_uv_faces.to_string()),
         ("degenerate 3-D faces", uv.degenerate_3d_faces.to_string()),
     ];

@@ -123,8 +123,14 @@ fn print_report(report: &OutputReport, seconds: f64) {
             seconds, i.boundary, i.stretch, i.conformal, i.editability, i.views_used
         );
         println!(
-            "       UV charts {}, utilisation {:.3}, flipped {} faces, overlapping {} faces, faces per chart {:?}",
-            u.charts, u.utilisation, m.bake.flipped_faces, m.bake.overlapping_faces, m.bake.faces_per_chart
+            "       UV charts {}, utilisation {:.3}, flipped {} faces ({} on creases of the mesh), overlapping {} faces, \
+             faces per chart {:?}",
+            u.charts,
+            u.utilisation,
+            m.bake.flipped_faces,
+            m.bake.flipped_on_creases,
+            m.bake.overlapping_faces,
+            m.bake.faces_per_chart
         );
     }
     for f in &report.files {

@@ -65,6 +65,8 @@ pub enum OutputError {
 pub struct BakeSummary {
     pub faces: usize,
     pub flipped_faces: usize,
+    /// Of the flipped faces, those on a crease of the input surface (`nuvo_atlas::uvstats`).
+    pub flipped_on_creases: usize,
     pub overlapping_faces: usize,
     pub degenerate_uv_faces: usize,
     pub split_vertices: usize,
@@ -181,6 +183,7 @@ fn summarize(r: &BakeReport, face_chart: &[u32], n: usize) -> BakeSummary {
     BakeSummary {
         faces: face_chart.len(),
         flipped_faces: r.flipped_faces.len(),
+        flipped_on_creases: r.stats.flipped_on_creases,
         overlapping_faces: r.overlapping_faces.len(),
         degenerate_uv_faces: r.degenerate_uv_faces.len(),
         split_vertices: r.split_vertices,
