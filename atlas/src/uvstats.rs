@@ -103,6 +103,7 @@ pub fn analyse_uv(
     if resolution == 0 || resolution > crate::camera::MAX_IMAGE_SIDE {
         return Err(AtlasError::invalid("UV raster resolution", format!("{resolution} is out of range")));
     }
+    let edges = EdgeUses::of(mesh);
     let (face_chart, charts) = match face_chart {
         Some(fc) if fc.len() != mesh.triangles.len() => {
             return Err(AtlasError::invalid(
@@ -111,12 +112,12 @@ pub fn analyse_uv(
             ));
         }
         Some(fc) => (fc.to_vec(), fc.iter().max().map_or(0, |&m| m as usize + 1)),
-        None => uv_charts(mesh, uv),
+        None => charts_along(&edges, mesh, uv),
     };
     let area2 = signed_uv_area2(uv);
     let degenerate_uv: Vec<u32> = ids(area2.iter().map(|a| a.abs() * 0.5 <= DEGENERATE_UV_AREA));
     let flipped = flipped_faces(&area2, &face_chart, charts);
-    let creased = creased_faces(mesh);
+    let creased = creases_along(&edges, mesh);
     let flipped_on_creases = flipped.iter().filter(|&&f| creased[f as usize]).count();
     let counts = uv_coverage(uv, resolution);
     let overlapping = overlapping_faces(uv, &counts, resolution);
@@ -142,18 +143,18 @@ pub fn analyse_uv(
 /// UV-connected components of the faces (module docs): `(chart of each face, number of charts)`,
 /// charts numbered in order of their first face.
 pub fn uv_charts(mesh: &TriMesh, uv: &UvLayer) -> (Vec<u32>, usize) {
+    charts_along(&EdgeUses::of(mesh), mesh, uv)
+}
+
+/// [`uv_charts`] on the mesh's edge uses.
+fn charts_along(edges: &EdgeUses, mesh: &TriMesh, uv: &UvLayer) -> (Vec<u32>, usize) {
     // Two uses of an edge join their faces when both ends have the same UVs in both faces.
     let uv_at =
         |e: &EdgeUse, end: usize| uv.coords[uv.triangles[e.face as usize][e.corners[end] as usize] as usize];
-    let edges = edge_uses(mesh);
     let mut dsu = Dsu::new(mesh.triangles.len());
-    for group in edges.chunk_by(|x, y| x.key == y.key) {
-        for (i, x) in group.iter().enumerate() {
-            for y in &group[i + 1..] {
-                if uv_at(x, 0) == uv_at(y, 0) && uv_at(x, 1) == uv_at(y, 1) {
-                    dsu.union(x.face, y.face);
-                }
-            }
+    for (x, y) in edges.pairs() {
+        if uv_at(x, 0) == uv_at(y, 0) && uv_at(x, 1) == uv_at(y, 1) {
+            dsu.union(x.face, y.face);
         }
     }
     let mut label = vec![u32::MAX; mesh.triangles.len()];
@@ -173,6 +174,11 @@ pub fn uv_charts(mesh: &TriMesh, uv: &UvLayer) -> (Vec<u32>, usize) {
 /// Whether each face is creased (module docs): it shares an edge with a face whose normal points
 /// more than 90° away from its own. Faces of zero 3-D area have no normal and crease nothing.
 pub fn creased_faces(mesh: &TriMesh) -> Vec<bool> {
+    creases_along(&EdgeUses::of(mesh), mesh)
+}
+
+/// [`creased_faces`] on the mesh's edge uses.
+fn creases_along(edges: &EdgeUses, mesh: &TriMesh) -> Vec<bool> {
     let normals: Vec<[f64; 3]> = (0..mesh.triangles.len())
         .into_par_iter()
         .map(|f| {
@@ -181,14 +187,10 @@ pub fn creased_faces(mesh: &TriMesh) -> Vec<bool> {
         })
         .collect();
     let mut creased = vec![false; mesh.triangles.len()];
-    for group in edge_uses(mesh).chunk_by(|x, y| x.key == y.key) {
-        for (i, x) in group.iter().enumerate() {
-            for y in &group[i + 1..] {
-                if dot(normals[x.face as usize], normals[y.face as usize]) < 0.0 {
-                    creased[x.face as usize] = true;
-                    creased[y.face as usize] = true;
-                }
-            }
+    for (x, y) in edges.pairs() {
+        if dot(normals[x.face as usize], normals[y.face as usize]) < 0.0 {
+            creased[x.face as usize] = true;
+            creased[y.face as usize] = true;
         }
     }
     creased
@@ -202,24 +204,36 @@ struct EdgeUse {
     corners: [u8; 2],
 }
 
-/// Every use of every non-collapsed edge, sorted by (edge, face) so the uses of one edge are
-/// adjacent and their order does not depend on the thread count.
-fn edge_uses(mesh: &TriMesh) -> Vec<EdgeUse> {
-    let mut edges: Vec<EdgeUse> = Vec::with_capacity(mesh.triangles.len() * 3);
-    for (f, t) in mesh.triangles.iter().enumerate() {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            let (k, l) = (k as u8, ((k + 1) % 3) as u8);
-            let (key, corners) = match a.cmp(&b) {
-                std::cmp::Ordering::Less => ((a, b), [k, l]),
-                std::cmp::Ordering::Greater => ((b, a), [l, k]),
-                std::cmp::Ordering::Equal => continue, // a collapsed edge connects nothing
-            };
-            edges.push(EdgeUse { key, face: f as u32, corners });
+/// Every use of every non-collapsed edge of a mesh, sorted by (edge, face) so the uses of one edge
+/// are adjacent and their order does not depend on the thread count. Built once per analysis and
+/// shared by the chart and crease passes.
+struct EdgeUses(Vec<EdgeUse>);
+
+impl EdgeUses {
+    fn of(mesh: &TriMesh) -> Self {
+        let mut edges: Vec<EdgeUse> = Vec::with_capacity(mesh.triangles.len() * 3);
+        for (f, t) in mesh.triangles.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                let (k, l) = (k as u8, ((k + 1) % 3) as u8);
+                let (key, corners) = match a.cmp(&b) {
+                    std::cmp::Ordering::Less => ((a, b), [k, l]),
+                    std::cmp::Ordering::Greater => ((b, a), [l, k]),
+                    std::cmp::Ordering::Equal => continue, // a collapsed edge connects nothing
+                };
+                edges.push(EdgeUse { key, face: f as u32, corners });
+            }
         }
+        edges.par_sort_unstable_by_key(|e| (e.key, e.face));
+        EdgeUses(edges)
     }
-    edges.par_sort_unstable_by_key(|e| (e.key, e.face));
-    edges
+
+    /// Every pair of uses of the same edge (each pair once, in sorted order).
+    fn pairs(&self) -> impl Iterator<Item = (&EdgeUse, &EdgeUse)> {
+        self.0.chunk_by(|x, y| x.key == y.key).flat_map(|group| {
+            group.iter().enumerate().flat_map(move |(i, x)| group[i + 1..].iter().map(move |y| (x, y)))
+        })
+    }
 }
 
 /// Twice the signed UV area of every face.
