@@ -15,6 +15,18 @@
 //! [`AtlasLayout`]. A vertex used by faces of different charts therefore gets one UV per chart
 //! (a seam: one position, several UV indices, as OBJ stores it); no triangle mixes charts. Faces
 //! are neither dropped nor reordered, positions are untouched.
+//!
+//! **Round-trip check** (not in the paper; optional, [`RoundTrip`]). A chart's texture map `t_i` is
+//! only trained to be injective where the chart assignment gives it the surface, so where `c`'s
+//! argmax strays onto a region that `t_i` also sends onto UVs of another region, the two overlap in
+//! the atlas. The surface network tells them apart: where `t_i` is a faithful chart, `s_i(t_i(x))`
+//! returns to `x`. Given the round-trip distances `|s_i(t_i(x_v)) − x_v|`, a face that overlaps
+//! another in the atlas and whose chart fails the round trip at one of its corners (distance above
+//! the tolerance) moves to the most probable chart (by the summed probabilities) that passes it at
+//! all three corners *and* keeps the face the same way round as that chart's majority (so the move
+//! cannot add a flip); a face no chart accepts stays where it was. Only overlapping faces move, so
+//! a sloppy surface network elsewhere does not cut the charts up. On the bunny this removes most
+//! overlapping faces and changes no score (BENCHMARKS.md, "Round-trip check").
 
 use std::collections::HashMap;
 
@@ -24,6 +36,28 @@ use serde::Serialize;
 use crate::error::AtlasError;
 use crate::pack::AtlasLayout;
 use crate::uvstats::{UvStats, analyse_uv};
+use crate::vecmath::signed_area2_2d;
+
+/// The per-vertex network outputs a bake reads (`V` vertices, `n` charts, row-major).
+#[derive(Clone, Copy, Debug)]
+pub struct ChartFields<'a> {
+    /// Chart probabilities `c(x_v)`, `V × n`.
+    pub probs: &'a [f32],
+    /// Every chart's UV `t_i(x_v)` in its own `[0,1]²`, `V × n × 2`.
+    pub uvs: &'a [f32],
+    /// Optional round-trip check (module docs); `None` bakes by the probabilities alone.
+    pub round_trip: Option<RoundTrip<'a>>,
+}
+
+/// The round-trip distances `|s_i(t_i(x_v)) − x_v|` (`V × n`) and the largest one a chart may have
+/// at the corners of a face it keeps (same units; module docs).
+#[derive(Clone, Copy, Debug)]
+pub struct RoundTrip<'a> {
+    /// Distance per vertex and chart, `V × n`.
+    pub distances: &'a [f32],
+    /// Largest accepted distance; a positive finite number.
+    pub tolerance: f32,
+}
 
 /// A baked mesh and what the bake found.
 #[derive(Clone, Debug, PartialEq)]
@@ -57,6 +91,8 @@ pub struct BakeReport {
     pub corners_outside_chart: usize,
     /// Faces whose three corners did not share the same argmax chart.
     pub mixed_faces: usize,
+    /// Faces the round-trip check moved off their most probable chart (0 without the check).
+    pub reassigned_faces: usize,
 }
 
 /// Bakes per-vertex chart probabilities and chart UVs of `mesh` into one UV layer in the atlas
@@ -65,89 +101,139 @@ pub struct BakeReport {
 /// entry.
 pub fn bake(
     mesh: &TriMesh,
-    probs: &[f32],
-    uvs: &[f32],
+    fields: &ChartFields<'_>,
     n_charts: usize,
     layout: &AtlasLayout,
 ) -> Result<Baked, AtlasError> {
-    check_inputs(mesh, probs, uvs, n_charts, layout)?;
+    check_inputs(mesh, fields, n_charts, layout)?;
     let n = n_charts;
-    let row = |v: u32| &probs[v as usize * n..(v as usize + 1) * n];
+    let row = |v: u32| &fields.probs[v as usize * n..(v as usize + 1) * n];
     let vertex_chart: Vec<u32> =
         (0..mesh.positions.len() as u32).map(|v| argmax(row(v).iter().copied())).collect();
-    let face_chart: Vec<u32> = mesh
+    let summed = |t: &[u32; 3], i: usize| t.iter().map(|&v| row(v)[i]).sum::<f32>();
+    let mut face_chart: Vec<u32> =
+        mesh.triangles.iter().map(|t| argmax((0..n).map(|i| summed(t, i)))).collect();
+    let mut layer = assemble(mesh, fields.uvs, n, layout, &face_chart);
+    let mut analysis = analyse_uv(&layer.mesh, Some(&face_chart), layout.resolution)?;
+    let mut reassigned_faces = 0;
+    if let Some(rt) = &fields.round_trip {
+        reassigned_faces = apply_round_trip(mesh, fields, rt, &analysis.overlapping, &mut face_chart);
+        if reassigned_faces > 0 {
+            layer = assemble(mesh, fields.uvs, n, layout, &face_chart);
+            analysis = analyse_uv(&layer.mesh, Some(&face_chart), layout.resolution)?;
+        }
+    }
+    let mixed_faces = mesh
         .triangles
         .iter()
-        .map(|t| argmax((0..n).map(|i| t.iter().map(|&v| row(v)[i]).sum::<f32>())))
-        .collect();
+        .filter(|t| t.iter().any(|&v| vertex_chart[v as usize] != vertex_chart[t[0] as usize]))
+        .count();
+    let report = BakeReport {
+        stats: analysis.stats,
+        flipped_faces: analysis.flipped,
+        overlapping_faces: analysis.overlapping,
+        degenerate_uv_faces: analysis.degenerate_uv,
+        split_vertices: layer.split_vertices,
+        corners_outside_chart: layer.corners_outside_chart,
+        mixed_faces,
+        reassigned_faces,
+    };
+    Ok(Baked { mesh: layer.mesh, face_chart, vertex_chart, report })
+}
+
+/// `mesh` with the UV layer of a face-chart assignment, and the counts found while building it.
+struct Assembled {
+    mesh: TriMesh,
+    split_vertices: usize,
+    corners_outside_chart: usize,
+}
+
+/// Builds the UV layer: every corner gets its face's chart's UV at that vertex, mapped into the
+/// atlas, one UV coordinate per (vertex, chart) pair in first-use order (module docs).
+fn assemble(mesh: &TriMesh, uvs: &[f32], n: usize, layout: &AtlasLayout, face_chart: &[u32]) -> Assembled {
     let chart_uv = |v: u32, c: u32| {
         let k = (v as usize * n + c as usize) * 2;
         [uvs[k], uvs[k + 1]]
     };
-    // One UV coordinate per (vertex, chart) pair actually used, numbered in first-use order.
+    let outside = |t: [f32; 2]| t.iter().any(|x| !(0.0..=1.0).contains(x));
     let mut index: HashMap<(u32, u32), u32> = HashMap::new();
     let mut coords = Vec::new();
     let mut corners_outside_chart = 0;
     let triangles: Vec<[u32; 3]> = mesh
         .triangles
         .iter()
-        .zip(&face_chart)
+        .zip(face_chart)
         .map(|(t, &c)| {
             t.map(|v| {
+                let t = chart_uv(v, c);
+                corners_outside_chart += outside(t) as usize;
                 *index.entry((v, c)).or_insert_with(|| {
-                    let t = chart_uv(v, c);
-                    corners_outside_chart += t.iter().any(|x| !(0.0..=1.0).contains(x)) as usize;
                     coords.push(layout.map(c as usize, t));
                     coords.len() as u32 - 1
                 })
             })
         })
         .collect();
-    // Count corners, not first uses, outside their chart.
-    let corners_outside_chart = if corners_outside_chart == 0 {
-        0
-    } else {
-        mesh.triangles
-            .iter()
-            .zip(&face_chart)
-            .flat_map(|(t, &c)| t.iter().map(move |&v| (v, c)))
-            .filter(|&(v, c)| chart_uv(v, c).iter().any(|x| !(0.0..=1.0).contains(x)))
-            .count()
-    };
     let mut uses = vec![0u8; mesh.positions.len()];
     for &(v, _) in index.keys() {
         uses[v as usize] = uses[v as usize].saturating_add(1);
     }
     let split_vertices = uses.iter().filter(|&&u| u > 1).count();
-    let mixed_faces = mesh
-        .triangles
-        .iter()
-        .filter(|t| t.iter().any(|&v| vertex_chart[v as usize] != vertex_chart[t[0] as usize]))
-        .count();
-    let baked = TriMesh { uv: Some(UvLayer { coords, triangles }), ..mesh.clone() };
-    let a = analyse_uv(&baked, Some(&face_chart), layout.resolution)?;
-    let report = BakeReport {
-        stats: a.stats,
-        flipped_faces: a.flipped,
-        overlapping_faces: a.overlapping,
-        degenerate_uv_faces: a.degenerate_uv,
-        split_vertices,
-        corners_outside_chart,
-        mixed_faces,
+    let mesh = TriMesh { uv: Some(UvLayer { coords, triangles }), ..mesh.clone() };
+    Assembled { mesh, split_vertices, corners_outside_chart }
+}
+
+/// Moves the `overlapping` faces whose chart fails the round trip (module docs) and returns how
+/// many moved.
+fn apply_round_trip(
+    mesh: &TriMesh,
+    fields: &ChartFields<'_>,
+    rt: &RoundTrip<'_>,
+    overlapping: &[u32],
+    face_chart: &mut [u32],
+) -> usize {
+    let n = fields.probs.len() / mesh.positions.len().max(1);
+    let passes = |t: &[u32; 3], i: usize| t.iter().all(|&v| rt.distances[v as usize * n + i] <= rt.tolerance);
+    let area = |t: &[u32; 3], i: usize| {
+        let uv = |v: u32| {
+            let k = (v as usize * n + i) * 2;
+            [fields.uvs[k], fields.uvs[k + 1]]
+        };
+        signed_area2_2d(uv(t[0]), uv(t[1]), uv(t[2]))
     };
-    Ok(Baked { mesh: baked, face_chart, vertex_chart, report })
+    // Each chart's majority orientation: the sign of its faces' total signed UV area.
+    let mut total = vec![0.0f64; n];
+    for (t, &c) in mesh.triangles.iter().zip(face_chart.iter()) {
+        total[c as usize] += area(t, c as usize);
+    }
+    let mut moved = 0;
+    for &f in overlapping {
+        let (t, c) = (&mesh.triangles[f as usize], &mut face_chart[f as usize]);
+        if passes(t, *c as usize) {
+            continue;
+        }
+        let sum = |i: usize| t.iter().map(|&v| fields.probs[v as usize * n + i]).sum::<f32>();
+        let mut candidates: Vec<usize> = (0..n).filter(|&i| i != *c as usize).collect();
+        candidates.sort_by(|&a, &b| sum(b).total_cmp(&sum(a)).then(a.cmp(&b)));
+        let accepted = candidates.into_iter().find(|&i| passes(t, i) && area(t, i) * total[i] > 0.0);
+        if let Some(i) = accepted {
+            *c = i as u32;
+            moved += 1;
+        }
+    }
+    moved
 }
 
 fn check_inputs(
     mesh: &TriMesh,
-    probs: &[f32],
-    uvs: &[f32],
+    fields: &ChartFields<'_>,
     n: usize,
     layout: &AtlasLayout,
 ) -> Result<(), AtlasError> {
     let bad = |m: String| Err(AtlasError::invalid("bake input", m));
     mesh.validate().map_err(|m| AtlasError::invalid("mesh", m))?;
     let nv = mesh.positions.len();
+    let (probs, uvs) = (fields.probs, fields.uvs);
     if n == 0 || layout.charts.len() != n {
         return bad(format!("{n} charts but the atlas layout has {}", layout.charts.len()));
     }
@@ -162,6 +248,25 @@ fn check_inputs(
     }
     if let Some(i) = uvs.iter().position(|p| !p.is_finite()) {
         return bad(format!("uvs of vertex {} chart {} is {}", i / (2 * n), i / 2 % n, uvs[i]));
+    }
+    if let Some(rt) = &fields.round_trip {
+        if rt.distances.len() != nv * n {
+            return bad(format!(
+                "round-trip distances have {} values, expected {nv} vertices × {n} charts",
+                rt.distances.len()
+            ));
+        }
+        if !(rt.tolerance.is_finite() && rt.tolerance > 0.0) {
+            return bad(format!("round-trip tolerance {} is not a positive number", rt.tolerance));
+        }
+        if let Some(i) = rt.distances.iter().position(|d| !d.is_finite()) {
+            return bad(format!(
+                "round-trip distance of vertex {} chart {} is {}",
+                i / n,
+                i % n,
+                rt.distances[i]
+            ));
+        }
     }
     Ok(())
 }
@@ -181,6 +286,11 @@ fn argmax(values: impl Iterator<Item = f32>) -> u32 {
 mod tests {
     use super::*;
     use crate::testmesh::grid;
+
+    /// Inputs without the round-trip check.
+    fn plain<'a>(probs: &'a [f32], uvs: &'a [f32]) -> ChartFields<'a> {
+        ChartFields { probs, uvs, round_trip: None }
+    }
 
     /// An 8×8-quad plane; vertices with x < 0 prefer chart 0 (0.9 vs 0.1), the others chart 1
     /// (0.2 vs 0.8), so a face belongs to chart 1 exactly when two or more corners have x ≥ 0. Each
@@ -202,7 +312,7 @@ mod tests {
     fn every_face_keeps_its_vertices_and_every_corner_gets_its_face_charts_uv() {
         let (m, probs, uvs) = two_chart_inputs();
         let layout = AtlasLayout::grid(2, 256, 2).unwrap();
-        let b = bake(&m, &probs, &uvs, 2, &layout).unwrap();
+        let b = bake(&m, &plain(&probs, &uvs), 2, &layout).unwrap();
         assert_eq!(b.mesh.triangles, m.triangles, "faces dropped, duplicated or reordered");
         assert_eq!(b.mesh.positions, m.positions);
         b.mesh.validate().unwrap();
@@ -249,7 +359,7 @@ mod tests {
         // Vertex argmaxes: 0, 1, 1 (a per-corner vote would say 1); sums: 1.5, 1.2, 0.3 → chart 0.
         let probs = [0.9, 0.0, 0.1, 0.3, 0.6, 0.1, 0.3, 0.6, 0.1];
         let uvs = [0.5f32; 18];
-        let b = bake(&m, &probs, &uvs, 3, &AtlasLayout::grid(3, 64, 1).unwrap()).unwrap();
+        let b = bake(&m, &plain(&probs, &uvs), 3, &AtlasLayout::grid(3, 64, 1).unwrap()).unwrap();
         assert_eq!(b.face_chart, vec![0]);
         assert_eq!(b.vertex_chart, vec![0, 1, 1]);
         assert_eq!(b.report.mixed_faces, 1);
@@ -263,22 +373,109 @@ mod tests {
         for (v, p) in m.positions.iter().enumerate() {
             uvs[v * 4] = (p[0] + 0.75).abs();
         }
-        let b = bake(&m, &probs, &uvs, 2, &AtlasLayout::grid(2, 256, 2).unwrap()).unwrap();
+        let b = bake(&m, &plain(&probs, &uvs), 2, &AtlasLayout::grid(2, 256, 2).unwrap()).unwrap();
         assert_eq!(b.report.flipped_faces.len(), 16, "{:?}", b.report.flipped_faces);
         assert!(b.report.flipped_faces.iter().all(|&f| m.corners(f as usize).iter().all(|c| c[0] <= -0.75)));
         assert!(!b.report.overlapping_faces.is_empty());
+    }
+
+    /// [`two_chart_inputs`] with chart 0's map folded along x = −0.75 (as in
+    /// [`a_folded_chart_map_is_reported`]: the strip x < −0.75 lands mirrored on its neighbour),
+    /// and round-trip distances saying so: chart 0 fails (1.0) at vertices with x < −0.75, chart 1
+    /// passes everywhere (0.0).
+    fn folded_with_round_trip() -> (TriMesh, Vec<f32>, Vec<f32>, Vec<f32>) {
+        let (m, probs, mut uvs) = two_chart_inputs();
+        for (v, p) in m.positions.iter().enumerate() {
+            uvs[v * 4] = (p[0] + 0.75).abs();
+        }
+        let d = m.positions.iter().flat_map(|p| [if p[0] < -0.75 { 1.0 } else { 0.0 }, 0.0]).collect();
+        (m, probs, uvs, d)
+    }
+
+    fn bake_checked(m: &TriMesh, probs: &[f32], uvs: &[f32], distances: &[f32]) -> Baked {
+        let rt = RoundTrip { distances, tolerance: 0.5 };
+        bake(m, &ChartFields { probs, uvs, round_trip: Some(rt) }, 2, &AtlasLayout::grid(2, 256, 2).unwrap())
+            .unwrap()
+    }
+
+    #[test]
+    fn overlapping_faces_failing_the_round_trip_move_to_a_chart_that_passes_it() {
+        let (m, probs, uvs, d) = folded_with_round_trip();
+        let plain = bake(&m, &plain(&probs, &uvs), 2, &AtlasLayout::grid(2, 256, 2).unwrap()).unwrap();
+        assert_eq!(plain.report.flipped_faces.len(), 16);
+        let b = bake_checked(&m, &probs, &uvs, &d);
+        for f in 0..m.triangles.len() {
+            let folded = m.corners(f).iter().any(|c| c[0] < -0.75);
+            let want = if folded { 1 } else { plain.face_chart[f] };
+            assert_eq!(b.face_chart[f], want, "face {f}");
+        }
+        assert_eq!(b.report.reassigned_faces, 16);
+        assert_eq!(plain.report.reassigned_faces, 0);
+        assert_eq!(b.report.flipped_faces, Vec::<u32>::new());
+        assert_eq!(b.report.overlapping_faces, Vec::<u32>::new(), "the fold is gone");
+    }
+
+    #[test]
+    fn faces_that_do_not_overlap_would_flip_or_fail_everywhere_stay() {
+        let (m, probs, uvs, d) = folded_with_round_trip();
+        let plain = bake(&m, &plain(&probs, &uvs), 2, &AtlasLayout::grid(2, 256, 2).unwrap()).unwrap();
+        // Chart 0 failing also where nothing overlaps (x > −0.5): those faces stay.
+        let d_wide: Vec<f32> = d
+            .chunks(2)
+            .zip(&m.positions)
+            .flat_map(|(d, p)| [d[0].max((p[0] > -0.5) as u8 as f32), d[1]])
+            .collect();
+        let b = bake_checked(&m, &probs, &uvs, &d_wide);
+        assert_eq!(b.report.reassigned_faces, 16, "only the folded strip overlaps");
+        // Chart 1 mirrored the other way on the strip: a move would flip the faces there.
+        let mut unmirrored = uvs.clone();
+        for (v, p) in m.positions.iter().enumerate() {
+            if p[0] <= -0.75 {
+                unmirrored[v * 4 + 2] = 1.0 - unmirrored[v * 4 + 2];
+            }
+        }
+        let b = bake_checked(&m, &probs, &unmirrored, &d);
+        for f in 0..m.triangles.len() {
+            if m.corners(f).iter().all(|c| c[0] <= -0.75) {
+                assert_eq!(b.face_chart[f], 0, "face {f} would flip in chart 1");
+            }
+        }
+        // Every chart failing: nothing moves.
+        let b = bake_checked(&m, &probs, &uvs, &vec![1.0; d.len()]);
+        assert_eq!(b.face_chart, plain.face_chart);
+        assert_eq!(b.report.reassigned_faces, 0);
+    }
+
+    #[test]
+    fn bad_round_trip_inputs_are_errors() {
+        let (m, probs, uvs) = two_chart_inputs();
+        let l = AtlasLayout::grid(2, 64, 1).unwrap();
+        let d = vec![0.0f32; m.positions.len() * 2];
+        let with = |distances: &[f32], tolerance: f32| {
+            let rt = RoundTrip { distances, tolerance };
+            bake(&m, &ChartFields { probs: &probs, uvs: &uvs, round_trip: Some(rt) }, 2, &l)
+                .map(|_| ())
+                .map_err(|e| e.to_string())
+        };
+        assert!(with(&d[1..], 0.5).unwrap_err().contains("round-trip distances have"));
+        assert!(with(&d, 0.0).unwrap_err().contains("tolerance"));
+        assert!(with(&d, f32::NAN).unwrap_err().contains("tolerance"));
+        let mut nan = d.clone();
+        nan[7] = f32::INFINITY;
+        assert!(with(&nan, 0.5).unwrap_err().contains("vertex 3 chart 1"));
+        assert!(with(&d, 0.5).is_ok());
     }
 
     #[test]
     fn bad_shapes_and_values_are_errors_naming_the_entry() {
         let (m, probs, uvs) = two_chart_inputs();
         let l = AtlasLayout::grid(2, 64, 1).unwrap();
-        assert!(bake(&m, &probs[1..], &uvs, 2, &l).is_err());
-        assert!(bake(&m, &probs, &uvs[1..], 2, &l).is_err());
-        assert!(bake(&m, &probs, &uvs, 3, &l).is_err());
+        assert!(bake(&m, &plain(&probs[1..], &uvs), 2, &l).is_err());
+        assert!(bake(&m, &plain(&probs, &uvs[1..]), 2, &l).is_err());
+        assert!(bake(&m, &plain(&probs, &uvs), 3, &l).is_err());
         let mut nan = uvs.clone();
         nan[4 * 3 + 3] = f32::NAN;
-        let e = bake(&m, &probs, &nan, 2, &l).unwrap_err().to_string();
+        let e = bake(&m, &plain(&probs, &nan), 2, &l).unwrap_err().to_string();
         assert!(e.contains("vertex 3 chart 1"), "{e}");
     }
 }

@@ -35,7 +35,7 @@ mod testmesh;
 pub mod uvstats;
 mod vecmath;
 
-pub use bake::{Baked, bake};
+pub use bake::{Baked, ChartFields, RoundTrip, bake};
 pub use camera::{Camera, orbit_views};
 pub use error::AtlasError;
 pub use metrics::{EvalOptions, Metrics, evaluate};

@@ -36,6 +36,10 @@ pub struct BakeArgs {
     /// Output folder (default: the run folder).
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Override a value of the run's stored config, e.g. `--set output.round_trip_tolerance=0`
+    /// (repeatable; the `output` table is what a bake reads).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    set: Vec<String>,
 }
 
 pub fn train(args: &TrainArgs) -> anyhow::Result<()> {
@@ -72,8 +76,9 @@ pub fn train(args: &TrainArgs) -> anyhow::Result<()> {
 pub fn bake(args: &BakeArgs) -> anyhow::Result<()> {
     let ckpt_path = if args.run.is_dir() { args.run.join(files::CHECKPOINT) } else { args.run.clone() };
     let ckpt = Checkpoint::load(&ckpt_path)?;
-    let loaded = config::from_str(&ckpt_path.display().to_string(), &ckpt.config_toml)
-        .with_context(|| format!("the config stored in {}", ckpt_path.display()))?;
+    let loaded =
+        config::from_str_with_overrides(&ckpt_path.display().to_string(), &ckpt.config_toml, &args.set)
+            .with_context(|| format!("the config stored in {}", ckpt_path.display()))?;
     let mut trainer = build_trainer(&loaded)?;
     trainer.restore(&ckpt)?;
     let out =
@@ -124,13 +129,14 @@ fn print_report(report: &OutputReport, seconds: f64) {
         );
         println!(
             "       UV charts {}, utilisation {:.3}, flipped {} faces ({} on creases of the mesh), overlapping {} faces, \
-             faces per chart {:?}",
+             faces per chart {:?} ({} moved by the round-trip check)",
             u.charts,
             u.utilisation,
             m.bake.flipped_faces,
             m.bake.flipped_on_creases,
             m.bake.overlapping_faces,
-            m.bake.faces_per_chart
+            m.bake.faces_per_chart,
+            m.bake.reassigned_faces
         );
     }
     for f in &report.files {

@@ -102,6 +102,21 @@ fn bake_redoes_the_outputs_from_a_run_folder() {
     let out = run(nuvo().current_dir(dir.path()).arg("bake").arg(&run_dir).arg("--out").arg(&baked));
     assert!(out.status.success());
     assert!(baked.join("atlas.glb").is_file() && baked.join("metrics.json").is_file());
+    let metrics = |dir: &Path| -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(dir.join("metrics.json")).unwrap()).unwrap()
+    };
+    assert_eq!(metrics(&baked)["bake"]["reassigned_faces"], 0, "the round-trip check is off by default");
+    // `--set` edits the stored config for this bake; a typo is named.
+    let checked = dir.path().join("checked");
+    let set = ["--set", "output.round_trip_tolerance=0.1", "--set", "output.renders=0"];
+    let out = run(nuvo().arg("bake").arg(&run_dir).args(set).arg("--out").arg(&checked));
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(metrics(&checked)["bake"]["reassigned_faces"].is_u64());
+    assert!(!checked.join("renders").exists(), "output.renders=0 was not applied");
+    let out = run(nuvo().arg("bake").arg(&run_dir).args(["--set", "output.round_trip_tolerans=0.1"]));
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("output.round_trip_tolerans") && err.contains("round_trip_tolerance"), "{err}");
 }
 
 #[test]

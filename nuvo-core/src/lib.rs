@@ -26,4 +26,4 @@ pub use checkpoint::{Checkpoint, CheckpointError};
 pub use config::{ConfigError, ExperimentConfig, LoadedConfig};
 pub use model::NuvoModel;
 pub use run::{Observer, RunOptions, RunSummary, run};
-pub use trainer::{StepOutcome, TrainError, Trainer};
+pub use trainer::{AtlasFields, StepOutcome, TrainError, Trainer};

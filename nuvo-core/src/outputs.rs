@@ -18,7 +18,7 @@
 use std::path::{Path, PathBuf};
 
 use nuvo_atlas::AtlasError;
-use nuvo_atlas::bake::{BakeReport, bake};
+use nuvo_atlas::bake::{BakeReport, ChartFields, RoundTrip, bake};
 use nuvo_atlas::camera::orbit_views;
 use nuvo_atlas::export::{GlbOptions, write_glb, write_obj};
 use nuvo_atlas::metrics::{EvalOptions, Metrics, evaluate};
@@ -31,7 +31,7 @@ use nuvo_losses::Networks;
 use serde::Serialize;
 
 use crate::config::OutputConfig;
-use crate::trainer::Trainer;
+use crate::trainer::{AtlasFields, Trainer};
 
 /// Output file names.
 pub mod names {
@@ -72,6 +72,8 @@ pub struct BakeSummary {
     pub split_vertices: usize,
     pub corners_outside_chart: usize,
     pub mixed_faces: usize,
+    /// Faces the round-trip check moved to another chart (`output.round_trip_tolerance`).
+    pub reassigned_faces: usize,
     /// Faces per chart.
     pub faces_per_chart: Vec<usize>,
 }
@@ -132,9 +134,11 @@ fn bake_and_measure(
 ) -> Result<OutputReport, OutputError> {
     let n = trainer.model().charts();
     let frame = trainer.source().to_canonical();
-    let (probs, uvs) = trainer.evaluate_atlas(&mesh.positions);
+    let fields = trainer.evaluate_atlas(&mesh.positions);
     let layout = AtlasLayout::grid(n, opts.atlas_resolution, opts.gutter)?;
-    let baked = bake(mesh, &probs, &uvs, n, &layout)?;
+    let round_trip = (opts.round_trip_tolerance > 0.0)
+        .then(|| RoundTrip { distances: &fields.round_trip, tolerance: opts.round_trip_tolerance });
+    let baked = bake(mesh, &ChartFields { probs: &fields.probs, uvs: &fields.uvs, round_trip }, n, &layout)?;
     let mut files = Vec::new();
     let path = |name: &str| dir.join(name);
 
@@ -189,6 +193,7 @@ fn summarize(r: &BakeReport, face_chart: &[u32], n: usize) -> BakeSummary {
         split_vertices: r.split_vertices,
         corners_outside_chart: r.corners_outside_chart,
         mixed_faces: r.mixed_faces,
+        reassigned_faces: r.reassigned_faces,
         faces_per_chart,
     }
 }
@@ -239,7 +244,7 @@ fn write_point_uvs(
     let n = trainer.model().charts();
     let frame = trainer.source().to_canonical();
     let pts = trainer.source().sample(POINTS, trainer.config().seed).positions;
-    let (probs, uvs) = trainer.evaluate_atlas(&pts);
+    let AtlasFields { probs, uvs, .. } = trainer.evaluate_atlas(&pts);
     let layout = AtlasLayout::grid(n, opts.atlas_resolution, opts.gutter)?;
     let mut csv = String::from("x,y,z,chart,u,v\n");
     for (k, p) in pts.iter().enumerate() {

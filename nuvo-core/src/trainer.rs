@@ -90,6 +90,18 @@ pub struct StepOutcome {
     pub skipped: Option<String>,
 }
 
+/// The trained networks evaluated at `V` points (`n` charts, row-major), what baking needs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AtlasFields {
+    /// Chart probabilities `c(x)`, `V×n`.
+    pub probs: Vec<f32>,
+    /// Every chart's texture coordinates `t_i(x)`, `V×n×2`.
+    pub uvs: Vec<f32>,
+    /// `|s_i(t_i(x)) − x|` per point and chart (`V×n`) in the model frame, where the geometry's
+    /// longest bounding-box side is 1: small where chart `i`'s map is faithful at `x`.
+    pub round_trip: Vec<f32>,
+}
+
 /// The model, its parameters and optimiser, the scene, and the losses.
 pub struct Trainer {
     config: ExperimentConfig,
@@ -304,13 +316,14 @@ impl Trainer {
         Ok(culprit)
     }
 
-    /// Chart probabilities (`V×n`) and every chart's texture coordinates (`V×n×2`) at points given
-    /// in the canonical frame, evaluated in chunks so memory stays bounded on huge meshes.
-    pub fn evaluate_atlas(&mut self, canonical: &[[f32; 3]]) -> (Vec<f32>, Vec<f32>) {
+    /// The networks' fields at points given in the canonical frame (see [`AtlasFields`]),
+    /// evaluated in chunks so memory stays bounded on huge meshes.
+    pub fn evaluate_atlas(&mut self, canonical: &[[f32; 3]]) -> AtlasFields {
         const CHUNK: usize = 16384;
         let n = self.model.charts();
         let mut probs = Vec::with_capacity(canonical.len() * n);
         let mut uvs = vec![0.0f32; canonical.len() * n * 2];
+        let mut round_trip = vec![0.0f32; canonical.len() * n];
         for (c, chunk) in canonical.chunks(CHUNK).enumerate() {
             self.tape.reset();
             let x = self.tape.input_with(Shape::new(chunk.len(), 3), |d| {
@@ -323,14 +336,17 @@ impl Trainer {
             probs.extend_from_slice(self.tape.value(p));
             for i in 0..n {
                 let t = self.model.texture(&mut self.tape, i, x);
-                for (k, uv) in self.tape.value(t).chunks_exact(2).enumerate() {
-                    let at = ((c * CHUNK + k) * n + i) * 2;
-                    uvs[at..at + 2].copy_from_slice(uv);
+                let back = self.model.surface(&mut self.tape, i, t);
+                let rows = self.tape.value(t).chunks_exact(2).zip(self.tape.value(back).chunks_exact(3));
+                for (k, ((uv, s), x)) in rows.zip(self.tape.value(x).chunks_exact(3)).enumerate() {
+                    let at = (c * CHUNK + k) * n + i;
+                    uvs[2 * at..2 * at + 2].copy_from_slice(uv);
+                    round_trip[at] = s.iter().zip(x).map(|(a, b)| (a - b) * (a - b)).sum::<f32>().sqrt();
                 }
             }
         }
         self.tape.reset();
-        (probs, uvs)
+        AtlasFields { probs, uvs, round_trip }
     }
 
     /// A checkpoint of the current state. Its config describes the experiment, not where or how

@@ -279,9 +279,12 @@ fn zero_weight_and_removed_losses_are_ablations() {
 fn atlas_evaluation_gives_probabilities_and_unit_square_uvs() {
     let mut t = trainer(&small(""));
     let pts = [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]];
-    let (p, uv) = t.evaluate_atlas(&pts);
+    let fields = t.evaluate_atlas(&pts);
+    let (p, uv) = (&fields.probs, &fields.uvs);
     assert_eq!(p.len(), 3 * 2);
     assert_eq!(uv.len(), 3 * 2 * 2);
+    assert_eq!(fields.round_trip.len(), 3 * 2);
+    assert!(fields.round_trip.iter().all(|d| d.is_finite() && *d >= 0.0));
     for row in p.chunks(2) {
         assert!((row.iter().sum::<f32>() - 1.0).abs() < 1e-5);
     }
@@ -379,7 +382,8 @@ fn agreement_with_the_projection_prior(warm_start: &str, steps: usize) -> (f32, 
             [r * a.cos(), r * a.sin(), z]
         })
         .collect();
-    let (probs, uvs) = t.evaluate_atlas(&pts);
+    let fields = t.evaluate_atlas(&pts);
+    let (probs, uvs) = (&fields.probs, &fields.uvs);
     let (mut agree, mut err) = (0usize, 0.0f32);
     for (k, p) in pts.iter().enumerate() {
         let row = &probs[k * 6..k * 6 + 6];
