@@ -117,7 +117,7 @@ pub fn bake(
     let mut analysis = analyse_uv(&layer.mesh, Some(&face_chart), layout.resolution)?;
     let mut reassigned_faces = 0;
     if let Some(rt) = &fields.round_trip {
-        reassigned_faces = apply_round_trip(mesh, fields, rt, &analysis.overlapping, &mut face_chart);
+        reassigned_faces = apply_round_trip(mesh, fields, rt, n, &analysis.overlapping, &mut face_chart);
         if reassigned_faces > 0 {
             layer = assemble(mesh, fields.uvs, n, layout, &face_chart);
             analysis = analyse_uv(&layer.mesh, Some(&face_chart), layout.resolution)?;
@@ -189,10 +189,10 @@ fn apply_round_trip(
     mesh: &TriMesh,
     fields: &ChartFields<'_>,
     rt: &RoundTrip<'_>,
+    n: usize,
     overlapping: &[u32],
     face_chart: &mut [u32],
 ) -> usize {
-    let n = fields.probs.len() / mesh.positions.len().max(1);
     let passes = |t: &[u32; 3], i: usize| t.iter().all(|&v| rt.distances[v as usize * n + i] <= rt.tolerance);
     let area = |t: &[u32; 3], i: usize| {
         let uv = |v: u32| {
