@@ -8,6 +8,7 @@ use std::time::Instant;
 use anyhow::Context;
 use nuvo_core::ablation::{self, Row, Variant, VariantError};
 use nuvo_core::config;
+use nuvo_core::run::{files, logged_seconds};
 use nuvo_geometry::SourceRegistry;
 use nuvo_geometry::fsio::write_bytes_atomic;
 use nuvo_losses::LossRegistry;
@@ -61,12 +62,10 @@ pub fn run(args: &AblateArgs) -> anyhow::Result<()> {
         println!("[{}/{}] {} -> {}", k + 1, variants.len(), v.name, out.join(&v.dir_name).display());
         let started = Instant::now();
         let result = run_one(args, v, &out, (&sources, &losses));
-        let row = Row {
-            name: v.name.clone(),
-            dir: out.join(&v.dir_name),
-            result,
-            seconds: started.elapsed().as_secs_f64(),
-        };
+        let dir = out.join(&v.dir_name);
+        let logged = std::fs::read_to_string(dir.join(files::LOG)).ok().map(|t| logged_seconds(&t));
+        let seconds = logged.filter(|&s| s > 0.0).unwrap_or_else(|| started.elapsed().as_secs_f64());
+        let row = Row { name: v.name.clone(), dir, result, seconds };
         match &row.result {
             Ok(s) => println!(
                 "[{}/{}] {}: Boundary {:.3}  Stretch {:.3}  Conformal {:.3}  UV Eff. {:.3}  Avg. {:.3}  ({:.0} s)",

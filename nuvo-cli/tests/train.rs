@@ -82,12 +82,16 @@ fn a_run_killed_mid_way_resumes_to_the_same_parameters() {
     let a = std::fs::read(full.join("checkpoint.safetensors")).unwrap();
     let b = std::fs::read(killed.join("checkpoint.safetensors")).unwrap();
     assert!(a == b, "the resumed run's checkpoint differs from the uninterrupted run's");
-    let steps: Vec<u64> = std::fs::read_to_string(log)
+    let lines: Vec<serde_json::Value> = std::fs::read_to_string(log)
         .unwrap()
         .lines()
-        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["step"].as_u64().unwrap())
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
         .collect();
+    let steps: Vec<u64> = lines.iter().map(|l| l["step"].as_u64().unwrap()).collect();
     assert_eq!(steps, (0..80).collect::<Vec<_>>(), "log has gaps or duplicates");
+    // `seconds` counts on across the resume instead of restarting at 0.
+    let seconds: Vec<f64> = lines.iter().map(|l| l["seconds"].as_f64().unwrap()).collect();
+    assert!(seconds.windows(2).all(|w| w[1] >= w[0]), "seconds went back: {seconds:?}");
 }
 
 #[test]

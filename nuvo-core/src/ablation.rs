@@ -279,7 +279,8 @@ pub struct Row {
     pub name: String,
     pub dir: PathBuf,
     pub result: Result<Scores, String>,
-    /// Wall time of the variant in this invocation.
+    /// Training seconds of the variant: its run log's `seconds`, over every session that trained
+    /// it (so a resumed sweep reports whole runs), or the wall time spent on it when it has no log.
     pub seconds: f64,
 }
 

@@ -4,7 +4,9 @@
 //! Files in the output folder (fixed names scripts can rely on):
 //! - `config.toml`: the resolved config (defaults filled in), written before the first step;
 //! - `log.jsonl`: one JSON object per step (`step`, `total`, `terms`, `lr_factor`, `sigma`,
-//!   `seconds`, `skipped`);
+//!   `seconds`, `skipped`); `seconds` is the wall time of training up to that step since the run
+//!   began, summed over resumed sessions (the steps a killed session ran after its last checkpoint
+//!   are redone and counted once);
 //! - `checkpoint.safetensors`: parameters and optimiser state, every `checkpoint_every` steps and at
 //!   the end, written atomically.
 //!
@@ -87,7 +89,7 @@ pub fn run(
     let config_text = toml::to_string(trainer.config()).unwrap_or_default();
     write_atomic(&config_path, config_text.as_bytes()).map_err(io_err(&config_path))?;
     let log_path = dir.join(files::LOG);
-    let mut log = open_log(&log_path, trainer.step_index())?;
+    let (mut log, earlier_seconds) = open_log(&log_path, trainer.step_index())?;
     observer.started(trainer, resumed_from);
 
     let start = Instant::now();
@@ -105,7 +107,8 @@ pub fn run(
             break;
         }
         let outcome = trainer.step()?;
-        write_log_line(&mut log, &outcome, start.elapsed().as_secs_f64()).map_err(io_err(&log_path))?;
+        let seconds = earlier_seconds + start.elapsed().as_secs_f64();
+        write_log_line(&mut log, &outcome, seconds).map_err(io_err(&log_path))?;
         observer.stepped(&outcome, trainer);
         if let Some(why) = &outcome.skipped {
             summary.skipped += 1;
@@ -197,11 +200,11 @@ fn check_same_experiment(trainer: &Trainer, ckpt: &Checkpoint) -> Result<(), Tra
 }
 
 /// Opens the log for appending, first dropping lines at or after `from_step` (left by a run that
-/// was killed after its last checkpoint).
-fn open_log(path: &Path, from_step: u64) -> Result<std::io::BufWriter<std::fs::File>, TrainError> {
+/// was killed after its last checkpoint); also returns the training seconds the kept lines record.
+fn open_log(path: &Path, from_step: u64) -> Result<(std::io::BufWriter<std::fs::File>, f64), TrainError> {
     if from_step == 0 {
         let f = std::fs::File::create(path).map_err(io_err(path))?;
-        return Ok(std::io::BufWriter::new(f));
+        return Ok((std::io::BufWriter::new(f), 0.0));
     }
     let old = std::fs::read_to_string(path).unwrap_or_default();
     let kept: String = old
@@ -216,7 +219,24 @@ fn open_log(path: &Path, from_step: u64) -> Result<std::io::BufWriter<std::fs::F
         .collect();
     write_atomic(path, kept.as_bytes()).map_err(io_err(path))?;
     let f = std::fs::OpenOptions::new().append(true).open(path).map_err(io_err(path))?;
-    Ok(std::io::BufWriter::new(f))
+    Ok((std::io::BufWriter::new(f), logged_seconds(&kept)))
+}
+
+/// The training seconds a log's text records: its last `seconds`, or, for logs written before
+/// `seconds` counted across resumed sessions (it restarted at 0 in each), the sum of each
+/// session's last value. 0 for an empty log.
+pub fn logged_seconds(log: &str) -> f64 {
+    let values = log
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok()?.get("seconds")?.as_f64());
+    let (mut finished_sessions, mut last) = (0.0, 0.0);
+    for v in values {
+        if v < last {
+            finished_sessions += last;
+        }
+        last = v;
+    }
+    finished_sessions + last
 }
 
 fn write_log_line(log: &mut impl Write, o: &StepOutcome, seconds: f64) -> std::io::Result<()> {
@@ -232,4 +252,22 @@ fn write_log_line(log: &mut impl Write, o: &StepOutcome, seconds: f64) -> std::i
         "skipped": o.skipped,
     });
     writeln!(log, "{line}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::logged_seconds;
+
+    fn log(seconds: &[f64]) -> String {
+        seconds.iter().enumerate().map(|(k, s)| format!("{{\"step\":{k},\"seconds\":{s}}}\n")).collect()
+    }
+
+    #[test]
+    fn logged_seconds_reads_the_last_value_and_sums_sessions_of_old_logs() {
+        assert_eq!(logged_seconds(""), 0.0);
+        assert_eq!(logged_seconds(&log(&[0.5, 1.0, 2.5, 3.0])), 3.0);
+        // An old log resumed twice: each session restarted at 0.
+        assert_eq!(logged_seconds(&log(&[1.0, 2.0, 0.5, 1.5, 0.25])), 2.0 + 1.5 + 0.25);
+        assert_eq!(logged_seconds("not json\n{\"step\":0}\n"), 0.0);
+    }
 }
