@@ -317,7 +317,7 @@ impl Trainer {
     }
 
     /// The networks' fields at points given in the canonical frame (see [`AtlasFields`]),
-    /// evaluated in chunks so memory stays bounded on huge meshes.
+    /// evaluated in chunks, one network pass at a time, so memory stays bounded on huge meshes.
     pub fn evaluate_atlas(&mut self, canonical: &[[f32; 3]]) -> AtlasFields {
         const CHUNK: usize = 16384;
         let n = self.model.charts();
@@ -325,16 +325,12 @@ impl Trainer {
         let mut uvs = vec![0.0f32; canonical.len() * n * 2];
         let mut round_trip = vec![0.0f32; canonical.len() * n];
         for (c, chunk) in canonical.chunks(CHUNK).enumerate() {
-            self.tape.reset();
-            let x = self.tape.input_with(Shape::new(chunk.len(), 3), |d| {
-                for (row, p) in d.chunks_exact_mut(3).zip(chunk) {
-                    row.iter_mut().zip(p).for_each(|(r, &v)| *r = v * MODEL_FRAME_SCALE);
-                }
-            });
+            let x = self.fresh_model_frame_input(chunk);
             let logits = self.model.chart_logits(&mut self.tape, x);
             let p = self.tape.softmax(logits);
             probs.extend_from_slice(self.tape.value(p));
             for i in 0..n {
+                let x = self.fresh_model_frame_input(chunk);
                 let t = self.model.texture(&mut self.tape, i, x);
                 let back = self.model.surface(&mut self.tape, i, t);
                 let rows = self.tape.value(t).chunks_exact(2).zip(self.tape.value(back).chunks_exact(3));
@@ -347,6 +343,16 @@ impl Trainer {
         }
         self.tape.reset();
         AtlasFields { probs, uvs, round_trip }
+    }
+
+    /// Clears the tape and records `canonical` points, scaled into the model frame, as its input.
+    fn fresh_model_frame_input(&mut self, canonical: &[[f32; 3]]) -> Var {
+        self.tape.reset();
+        self.tape.input_with(Shape::new(canonical.len(), 3), |d| {
+            for (row, p) in d.chunks_exact_mut(3).zip(canonical) {
+                row.iter_mut().zip(p).for_each(|(r, &v)| *r = v * MODEL_FRAME_SCALE);
+            }
+        })
     }
 
     /// A checkpoint of the current state. Its config describes the experiment, not where or how
