@@ -8,8 +8,10 @@ use nuvo_autodiff::{Shape, Tape, Var};
 
 use crate::networks::Networks;
 
-/// The raw data of one step. Invariant: `points`, `normals`, `tangents_p` and `tangents_q` have the
-/// same length; `(tangents_p[k], tangents_q[k], normals[k])` is an orthonormal frame.
+/// The raw data of one step. Invariant: `points` and `normals` have the same length `B`;
+/// `tangents_p` and `tangents_q` have the same length `k ≤ B` and `(tangents_p[j], tangents_q[j],
+/// normals[j])` is an orthonormal frame: the first `k` samples are the ones the distortion losses
+/// read (all of them unless `training.batch_distortion` says otherwise).
 #[derive(Clone, Copy, Debug)]
 pub struct StepData<'a> {
     /// Surface samples `x` in the model frame.
@@ -158,7 +160,7 @@ impl<'a> StepContext<'a> {
         })
     }
 
-    /// The offset points `(x + εp, x + εq)` (constants).
+    /// The offset points `(x + εp, x + εq)` of the distortion samples (constants, `k×3`).
     fn offsets(&mut self) -> (Var, Var) {
         cached!(self.offsets, {
             let d = self.data;
@@ -174,7 +176,7 @@ impl<'a> StepContext<'a> {
         })
     }
 
-    /// `(t_i(x + εp), t_i(x + εq))`.
+    /// `(t_i(x + εp), t_i(x + εq))` for the distortion samples.
     pub fn tex_at_offsets(&mut self, i: usize) -> (Var, Var) {
         cached!(self.tex_offsets[i], {
             let (xp, xq) = self.offsets();
@@ -182,11 +184,19 @@ impl<'a> StepContext<'a> {
         })
     }
 
-    /// The paper's UV vectors `D t_i(εp) ≈ t_i(x + εp) − t_i(x)` and `D t_i(εq)` (`B×2` each): the
-    /// finite-difference images of the tangent vectors `εp` and `εq` (not divided by `ε`).
+    /// Number of distortion samples `k`: the first `k` of the 3-D samples (see [`StepData`]).
+    pub fn batch_distortion(&self) -> usize {
+        self.data.tangents_p.len()
+    }
+
+    /// The paper's UV vectors `D t_i(εp) ≈ t_i(x + εp) − t_i(x)` and `D t_i(εq)` (`k×2` each, for
+    /// the first [`Self::batch_distortion`] samples): the finite-difference images of the tangent
+    /// vectors `εp` and `εq` (not divided by `ε`).
     pub fn uv_differentials(&mut self, i: usize) -> (Var, Var) {
         cached!(self.differentials[i], {
+            let k = self.batch_distortion();
             let t = self.tex(i);
+            let t = if k < self.batch_3d() { self.tape.slice_rows(t, 0, k) } else { t };
             let (tp, tq) = self.tex_at_offsets(i);
             (self.tape.sub(tp, t), self.tape.sub(tq, t))
         })

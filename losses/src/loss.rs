@@ -29,10 +29,14 @@ pub trait Loss: Send + Sync {
 }
 
 /// `(1/|G|) Σ_x Σ_i c(x)[i] · d_i(x)`: the chart-probability-weighted batch mean that most of the
-/// paper's 3-D losses share. `per_chart[i]` is `d_i`, a `B×1` column.
+/// paper's 3-D losses share. `per_chart[i]` is `d_i`, a column over the first `r ≤ B` samples
+/// (`r×1`; all `B` for most losses, the distortion samples for `conformal` and `stretch`), and the
+/// mean is over those `r`.
 pub fn chart_weighted_mean(ctx: &mut StepContext<'_>, per_chart: &[Var]) -> Var {
-    let c = ctx.chart_probs();
-    let b = ctx.batch_3d().max(1) as f32;
+    let rows = ctx.tape.shape(per_chart[0]).rows;
+    let all = ctx.chart_probs();
+    let c = if rows < ctx.batch_3d() { ctx.tape.slice_rows(all, 0, rows) } else { all };
+    let b = rows.max(1) as f32;
     let t = &mut *ctx.tape;
     let d = if per_chart.len() == 1 { per_chart[0] } else { t.concat_cols(per_chart) };
     let w = t.mul(d, c);

@@ -71,6 +71,8 @@ pub(crate) struct Scene {
     sigma: Tensor,
     grids: Vec<Tensor>,
     grid_res: usize,
+    /// Tangent frames for the first this many samples only (the distortion samples); all if `None`.
+    distortion_samples: Option<usize>,
 }
 
 impl Scene {
@@ -88,6 +90,7 @@ impl Scene {
             sigma: Tensor::scalar(1.0),
             grids: vec![Tensor::zeros(4, 3)],
             grid_res: 2,
+            distortion_samples: None,
         }
     }
 
@@ -142,6 +145,12 @@ impl Scene {
         self
     }
 
+    /// Only the first `k` samples carry tangent frames, so the distortion losses read those alone.
+    pub fn with_distortion_samples(mut self, k: usize) -> Self {
+        self.distortion_samples = Some(k);
+        self
+    }
+
     pub fn epsilon(&self) -> f32 {
         self.epsilon
     }
@@ -174,7 +183,8 @@ impl Scene {
     /// Records `loss` with the parameters `v` and returns its Var.
     fn record(&self, tape: &mut Tape, v: &[Var], loss: &dyn Loss) -> Var {
         let nets = self.nets(v);
-        let (p, q) = tangents(&self.normals);
+        let k = self.distortion_samples.unwrap_or(self.normals.len());
+        let (p, q) = tangents(&self.normals[..k]);
         let data = StepData {
             points: &self.points,
             normals: &self.normals,
@@ -244,6 +254,7 @@ impl Scene {
                 })
                 .collect(),
             grid_res: 4,
+            distortion_samples: None,
         }
     }
 }
@@ -251,7 +262,11 @@ impl Scene {
 /// Checks `loss`'s gradient with respect to every network parameter of [`Scene::generic`] against
 /// finite differences.
 pub(crate) fn check_loss_gradient(loss: &dyn Loss) {
-    let scene = Scene::generic();
+    check_loss_gradient_on(&Scene::generic(), loss);
+}
+
+/// [`check_loss_gradient`] on a variant of [`Scene::generic`] (same points and networks).
+pub(crate) fn check_loss_gradient_on(scene: &Scene, loss: &dyn Loss) {
     // The texture coordinates must sit strictly inside grid cells for the check to be meaningful.
     let tex = |i: usize, x: &[f32; 3]| -> [f32; 2] {
         let (w, b) = &scene.tex[i];

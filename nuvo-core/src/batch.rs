@@ -8,7 +8,8 @@ use rand_chacha::ChaCha8Rng;
 use crate::model::MODEL_FRAME_SCALE;
 use crate::seeds::{Stream, derive};
 
-/// The data of one step, in the model frame. Invariant: the per-sample vectors have equal lengths.
+/// The data of one step, in the model frame. Invariant: `points` and `normals` have equal lengths;
+/// the tangents, equal to each other, cover the first of them (see [`StepData`]).
 #[derive(Clone, Debug, Default)]
 pub struct StepBatch {
     pub points: Vec<[f32; 3]>,
@@ -29,10 +30,11 @@ pub struct ShortBatch {
 
 impl StepBatch {
     /// Draws the batch of `step` for a run seeded with `seed`: a pure function of its arguments.
+    /// Tangent frames are drawn for the first `batch_distortion` samples only (the ones the
+    /// distortion losses read), from the same stream, so they do not depend on that count.
     pub fn draw(
         source: &dyn GeometrySource,
-        batch_3d: usize,
-        batch_uv: usize,
+        (batch_3d, batch_uv, batch_distortion): (usize, usize, usize),
         seed: u64,
         step: u64,
     ) -> Result<Self, ShortBatch> {
@@ -41,7 +43,8 @@ impl StepBatch {
         let mut rng = ChaCha8Rng::seed_from_u64(derive(seed, step, Stream::Uv));
         let uv = (0..batch_uv).map(|_| [rng.random::<f32>(), rng.random::<f32>()]).collect();
         let mut rng = ChaCha8Rng::seed_from_u64(derive(seed, step, Stream::Tangents));
-        let (tangents_p, tangents_q) = normals.iter().map(|n| random_tangent_frame(n, &mut rng)).unzip();
+        let (tangents_p, tangents_q) =
+            normals.iter().take(batch_distortion).map(|n| random_tangent_frame(n, &mut rng)).unzip();
         Ok(StepBatch { points, normals, uv, tangents_p, tangents_q })
     }
 

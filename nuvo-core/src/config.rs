@@ -136,6 +136,11 @@ pub struct TrainingConfig {
     pub batch_3d: usize,
     /// UV samples per step `|T|`.
     pub batch_uv: usize,
+    /// How many of the 3-D samples carry the distortion losses (`conformal`, `stretch`), which each
+    /// cost two more texture-network passes per chart; default all of `batch_3d` (the paper). Not
+    /// in the paper when smaller: the first `batch_distortion` samples of the (random) batch.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub batch_distortion: Option<usize>,
     /// Stop early after this many minutes of training (results then depend on the machine's speed).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub time_budget_minutes: Option<f64>,
@@ -153,6 +158,7 @@ impl Default for TrainingConfig {
             steps: 2000,
             batch_3d: 5000,
             batch_uv: 5000,
+            batch_distortion: None,
             time_budget_minutes: None,
             epsilon: 1e-2,
             checkpoint_every: 250,
@@ -577,6 +583,15 @@ impl ExperimentConfig {
         }
         positive("training.batch_3d", t.batch_3d)?;
         positive("training.batch_uv", t.batch_uv)?;
+        if let Some(k) = t.batch_distortion {
+            positive("training.batch_distortion", k)?;
+            if k > t.batch_3d {
+                return Err(src.invalid(
+                    "training.batch_distortion",
+                    format!("{k} is more than the {} samples of training.batch_3d", t.batch_3d),
+                ));
+            }
+        }
         if t.steps == 0 {
             return Err(src.invalid("training.steps", "must be at least 1"));
         }
@@ -705,6 +720,14 @@ mod tests {
         assert!(e.contains("training.batch_3d"), "{e}");
         let e = from_str("c.toml", &format!("{MINIMAL}[training]\nbatch_3d = 0\n")).unwrap_err().to_string();
         assert!(e.contains("training.batch_3d") && e.contains("at least 1"), "{e}");
+        let e = from_str("c.toml", &format!("{MINIMAL}[training]\nbatch_3d = 64\nbatch_distortion = 65\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("training.batch_distortion") && e.contains("training.batch_3d"), "{e}");
+        let e = from_str("c.toml", &format!("{MINIMAL}[training]\nbatch_distortion = 0\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("training.batch_distortion") && e.contains("at least 1"), "{e}");
     }
 
     #[test]

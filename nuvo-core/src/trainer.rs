@@ -242,7 +242,8 @@ impl Trainer {
 
     fn step_on_worker(&mut self) -> Result<StepOutcome, TrainError> {
         let t = &self.config.training;
-        self.batch = StepBatch::draw(&*self.source, t.batch_3d, t.batch_uv, self.config.seed, self.step)?;
+        let sizes = (t.batch_3d, t.batch_uv, t.batch_distortion.unwrap_or(t.batch_3d));
+        self.batch = StepBatch::draw(&*self.source, sizes, self.config.seed, self.step)?;
         let lr_factor = self.schedule.factor(self.step) * self.lr_scale;
         let mut outcome = StepOutcome {
             step: self.step,

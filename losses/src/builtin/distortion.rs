@@ -180,13 +180,31 @@ impl Loss for Stretch {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testing::{Scene, check_loss_gradient};
+    use crate::testing::{Scene, check_loss_gradient, check_loss_gradient_on};
 
     #[test]
     fn a_sheared_map_has_squared_cosine_one_half() {
         // t(x) = (x + y, y): p = (1,0,0) ↦ (ε, 0), q = (0,1,0) ↦ (ε, ε); cos = 1/√2.
         let scene = Scene::plane_points(&[[0.1, 0.2, 0.0], [0.3, 0.1, 0.0]]).with_texture_shear(1.0);
         assert!((scene.evaluate(&Conformal) - 0.5).abs() < 1e-3, "{}", scene.evaluate(&Conformal));
+    }
+
+    #[test]
+    fn the_distortion_losses_read_only_the_distortion_samples() {
+        // The sheared map of the test above: cos² = ½ in the tangent frame of normal +z, and 0 in
+        // that of normal +x (q = z, which t ignores, so the floor makes it 0).
+        let scene = Scene::plane_points(&[[0.1, 0.2, 0.0], [0.3, 0.1, 0.0]])
+            .with_normals(&[[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+            .with_texture_shear(1.0);
+        assert!((scene.evaluate(&Conformal) - 0.25).abs() < 1e-3, "{}", scene.evaluate(&Conformal));
+        let first = scene.clone().with_distortion_samples(1);
+        assert!((first.evaluate(&Conformal) - 0.5).abs() < 1e-3, "{}", first.evaluate(&Conformal));
+        let generic = Scene::generic().with_distortion_samples(3);
+        check_loss_gradient_on(&generic, &Conformal);
+        check_loss_gradient_on(
+            &generic,
+            &Stretch { options: StretchOptions { relative: true, ..Default::default() } },
+        );
     }
 
     #[test]
