@@ -372,20 +372,9 @@ pub fn load_edited(
     }
     let text =
         std::fs::read_to_string(path).map_err(|source| ConfigError::Io { path: path.to_owned(), source })?;
-    let mut source = ConfigSource { path: path.to_owned(), text, overridden: BTreeSet::new() };
-    let mut tree: toml::Table = toml::from_str(&source.text).map_err(|e| ConfigError::Syntax {
-        path: path.to_owned(),
-        message: e.to_string().trim().to_owned(),
-    })?;
+    let source = ConfigSource { path: path.to_owned(), text, overridden: BTreeSet::new() };
     let cwd = std::env::current_dir().unwrap_or_default();
-    for arg in overrides {
-        let key = apply_override(&mut tree, arg, &cwd)?;
-        source.overridden.insert(key);
-    }
-    edit(&mut tree, &source)?;
-    let mut config = ExperimentConfig::deserialize(toml::Value::Table(tree))
-        .map_err(|e| source.serde_error("", &e.to_string()))?;
-    config.validate(&source)?;
+    let (mut config, source) = resolve(source, overrides, &cwd, edit)?;
     config.absolutize_paths(&cwd.join(source.base_dir()));
     Ok(LoadedConfig { config, source })
 }
@@ -402,20 +391,33 @@ pub fn from_str_with_overrides(
     text: &str,
     overrides: &[String],
 ) -> Result<LoadedConfig, ConfigError> {
-    let mut source = ConfigSource::in_memory(name, text);
-    let mut tree: toml::Table = toml::from_str(text).map_err(|e| ConfigError::Syntax {
-        path: PathBuf::from(name),
+    let cwd = std::env::current_dir().unwrap_or_default();
+    let (config, source) = resolve(ConfigSource::in_memory(name, text), overrides, &cwd, |_, _| Ok(()))?;
+    Ok(LoadedConfig { config, source })
+}
+
+/// The shared path of [`load_edited`] and [`from_str_with_overrides`]: parses `source`'s text,
+/// applies `overrides` (recording them in the source), then `edit`, and deserialises and validates
+/// the result.
+fn resolve(
+    mut source: ConfigSource,
+    overrides: &[String],
+    cwd: &Path,
+    edit: impl FnOnce(&mut toml::Table, &ConfigSource) -> Result<(), ConfigError>,
+) -> Result<(ExperimentConfig, ConfigSource), ConfigError> {
+    let mut tree: toml::Table = toml::from_str(&source.text).map_err(|e| ConfigError::Syntax {
+        path: source.path.clone(),
         message: e.to_string().trim().to_owned(),
     })?;
-    let cwd = std::env::current_dir().unwrap_or_default();
     for arg in overrides {
-        let key = apply_override(&mut tree, arg, &cwd)?;
+        let key = apply_override(&mut tree, arg, cwd)?;
         source.overridden.insert(key);
     }
+    edit(&mut tree, &source)?;
     let config = ExperimentConfig::deserialize(toml::Value::Table(tree))
         .map_err(|e| source.serde_error("", &e.to_string()))?;
     config.validate(&source)?;
-    Ok(LoadedConfig { config, source })
+    Ok((config, source))
 }
 
 /// Applies one `key.path=value` override; returns the dotted key. Paths set this way that name
