@@ -110,9 +110,8 @@ pub fn bake(
     let row = |v: u32| &fields.probs[v as usize * n..(v as usize + 1) * n];
     let vertex_chart: Vec<u32> =
         (0..mesh.positions.len() as u32).map(|v| argmax(row(v).iter().copied())).collect();
-    let summed = |t: &[u32; 3], i: usize| t.iter().map(|&v| row(v)[i]).sum::<f32>();
     let mut face_chart: Vec<u32> =
-        mesh.triangles.iter().map(|t| argmax((0..n).map(|i| summed(t, i)))).collect();
+        mesh.triangles.iter().map(|t| argmax((0..n).map(|i| summed_prob(fields.probs, n, t, i)))).collect();
     let mut layer = assemble(mesh, fields.uvs, n, layout, &face_chart);
     let mut analysis = analyse_uv(&layer.mesh, Some(&face_chart), layout.resolution)?;
     let mut reassigned_faces = 0;
@@ -151,10 +150,6 @@ struct Assembled {
 /// Builds the UV layer: every corner gets its face's chart's UV at that vertex, mapped into the
 /// atlas, one UV coordinate per (vertex, chart) pair in first-use order (module docs).
 fn assemble(mesh: &TriMesh, uvs: &[f32], n: usize, layout: &AtlasLayout, face_chart: &[u32]) -> Assembled {
-    let chart_uv = |v: u32, c: u32| {
-        let k = (v as usize * n + c as usize) * 2;
-        [uvs[k], uvs[k + 1]]
-    };
     let outside = |t: [f32; 2]| t.iter().any(|x| !(0.0..=1.0).contains(x));
     let mut index: HashMap<(u32, u32), u32> = HashMap::new();
     let mut coords = Vec::new();
@@ -165,7 +160,7 @@ fn assemble(mesh: &TriMesh, uvs: &[f32], n: usize, layout: &AtlasLayout, face_ch
         .zip(face_chart)
         .map(|(t, &c)| {
             t.map(|v| {
-                let t = chart_uv(v, c);
+                let t = chart_uv(uvs, n, v, c as usize);
                 corners_outside_chart += outside(t) as usize;
                 *index.entry((v, c)).or_insert_with(|| {
                     coords.push(layout.map(c as usize, t));
@@ -195,10 +190,7 @@ fn apply_round_trip(
 ) -> usize {
     let passes = |t: &[u32; 3], i: usize| t.iter().all(|&v| rt.distances[v as usize * n + i] <= rt.tolerance);
     let area = |t: &[u32; 3], i: usize| {
-        let uv = |v: u32| {
-            let k = (v as usize * n + i) * 2;
-            [fields.uvs[k], fields.uvs[k + 1]]
-        };
+        let uv = |v: u32| chart_uv(fields.uvs, n, v, i);
         signed_area2_2d(uv(t[0]), uv(t[1]), uv(t[2]))
     };
     // Each chart's majority orientation: the sign of its faces' total signed UV area.
@@ -212,7 +204,7 @@ fn apply_round_trip(
         if passes(t, *c as usize) {
             continue;
         }
-        let sum = |i: usize| t.iter().map(|&v| fields.probs[v as usize * n + i]).sum::<f32>();
+        let sum = |i: usize| summed_prob(fields.probs, n, t, i);
         let mut candidates: Vec<usize> = (0..n).filter(|&i| i != *c as usize).collect();
         candidates.sort_by(|&a, &b| sum(b).total_cmp(&sum(a)).then(a.cmp(&b)));
         let accepted = candidates.into_iter().find(|&i| passes(t, i) && area(t, i) * total[i] > 0.0);
@@ -269,6 +261,17 @@ fn check_inputs(
         }
     }
     Ok(())
+}
+
+/// Chart `i`'s probability summed over the corners of face `t` (`probs` is `V × n`).
+fn summed_prob(probs: &[f32], n: usize, t: &[u32; 3], i: usize) -> f32 {
+    t.iter().map(|&v| probs[v as usize * n + i]).sum()
+}
+
+/// Chart `c`'s own UV at vertex `v` (`uvs` is `V × n × 2`).
+fn chart_uv(uvs: &[f32], n: usize, v: u32, c: usize) -> [f32; 2] {
+    let k = (v as usize * n + c) * 2;
+    [uvs[k], uvs[k + 1]]
 }
 
 /// Index of the largest value, the lowest index on ties.
@@ -367,21 +370,17 @@ mod tests {
 
     #[test]
     fn a_folded_chart_map_is_reported() {
-        let (m, probs, mut uvs) = two_chart_inputs();
-        // Fold chart 0's map along x = -0.75: u = |x + 0.75|, so the strip x < -0.75 (16 faces, a
+        // Chart 0's map folded along x = -0.75: u = |x + 0.75|, so the strip x < -0.75 (16 faces, a
         // minority of chart 0) is mirrored onto its neighbour.
-        for (v, p) in m.positions.iter().enumerate() {
-            uvs[v * 4] = (p[0] + 0.75).abs();
-        }
+        let (m, probs, uvs, _) = folded_with_round_trip();
         let b = bake(&m, &plain(&probs, &uvs), 2, &AtlasLayout::grid(2, 256, 2).unwrap()).unwrap();
         assert_eq!(b.report.flipped_faces.len(), 16, "{:?}", b.report.flipped_faces);
         assert!(b.report.flipped_faces.iter().all(|&f| m.corners(f as usize).iter().all(|c| c[0] <= -0.75)));
         assert!(!b.report.overlapping_faces.is_empty());
     }
 
-    /// [`two_chart_inputs`] with chart 0's map folded along x = −0.75 (as in
-    /// [`a_folded_chart_map_is_reported`]: the strip x < −0.75 lands mirrored on its neighbour),
-    /// and round-trip distances saying so: chart 0 fails (1.0) at vertices with x < −0.75, chart 1
+    /// [`two_chart_inputs`] with chart 0's map folded along x = −0.75 (u = |x + 0.75|: the strip
+    /// x < −0.75 lands mirrored on its neighbour), and round-trip distances saying so: chart 0 fails (1.0) at vertices with x < −0.75, chart 1
     /// passes everywhere (0.0).
     fn folded_with_round_trip() -> (TriMesh, Vec<f32>, Vec<f32>, Vec<f32>) {
         let (m, probs, mut uvs) = two_chart_inputs();
