@@ -3,6 +3,12 @@
 //! Losses ask for quantities (`c(x)`, `t_i(x)`, `s_i(u)`, …) through getters. The first request
 //! records the evaluation on the tape and caches the [`Var`]; later requests, from the same or another
 //! loss, get the cached one. So however many losses read `t_i(x)`, each network runs once per input.
+//!
+//! The `support_*` getters serve the losses whose per-chart terms are weighted by `c(x)[i]`: they
+//! evaluate chart `i` only on its *support*, the samples where `c(x)[i] ≥ τ`
+//! (`training.chart_support`). Once the charts have settled, most samples belong to one or two of
+//! them, so this skips most of the per-chart passes over the 3-D samples while changing each loss
+//! by less than `τ` times its size. With `τ = 0` they return exactly what the plain getters do.
 
 use nuvo_autodiff::{Shape, Tape, Var};
 
@@ -26,6 +32,18 @@ pub struct StepData<'a> {
     pub tangents_q: &'a [[f32; 3]],
     /// Finite-difference step `ε` of the distortion losses (the paper uses 1e-2).
     pub epsilon: f32,
+    /// The chart-support threshold `τ` of the `support_*` getters (`training.chart_support`): chart
+    /// `i` is evaluated on the samples where `c(x)[i] ≥ τ`. 0 evaluates every chart everywhere.
+    pub chart_support: f32,
+}
+
+/// The 3-D samples a chart is evaluated on by the `support_*` getters: those where its probability
+/// reaches the threshold. Invariant: `rows` is strictly increasing and non-empty, so the distortion
+/// samples among them (indices below `k`) are its first `distortion` entries.
+#[derive(Clone, Debug)]
+struct Support {
+    rows: Vec<u32>,
+    distortion: usize,
 }
 
 #[derive(Default)]
@@ -46,6 +64,22 @@ struct Cache {
     chart_log_probs_at_surface: Option<Var>,
     sigma: Option<Var>,
     grids: Vec<Option<(Var, usize)>>,
+    /// Per chart: `None` when the chart is evaluated on every sample (no pruning).
+    support: Vec<Option<Option<Support>>>,
+    support_tex: Vec<Option<Var>>,
+    support_differentials: Vec<Option<(Var, Var)>>,
+    support_cycle_points: Vec<Option<Var>>,
+}
+
+/// Which 3-D samples a per-chart column of a loss covers (see [`crate::chart_weighted_mean`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Samples {
+    /// Every sample of the batch.
+    All,
+    /// The chart's support ([`StepContext::support_tex`] and the other `support_*` getters).
+    Support,
+    /// The distortion samples in the chart's support ([`StepContext::support_uv_differentials`]).
+    DistortionSupport,
 }
 
 /// Shared forward results of one step. See the module docs.
@@ -92,6 +126,10 @@ impl<'a> StepContext<'a> {
             surface_points: vec![None; n],
             cycle_uv: vec![None; n],
             grids: vec![None; n],
+            support: vec![None; n],
+            support_tex: vec![None; n],
+            support_differentials: vec![None; n],
+            support_cycle_points: vec![None; n],
             ..Cache::default()
         };
         StepContext { tape, nets, data, cache }
@@ -241,6 +279,112 @@ impl<'a> StepContext<'a> {
             let s = self.all_surface_points();
             let l = self.nets.chart_logits(self.tape, s);
             self.tape.log_softmax(l)
+        })
+    }
+
+    /// Chart `i`'s support: the samples where `c(x)[i] ≥ τ` (`StepData::chart_support`), or `None`
+    /// when that is every sample (or `τ = 0`). A chart that reaches `τ` on none of the distortion
+    /// samples keeps its most probable one, so no evaluation is ever empty.
+    fn support(&mut self, i: usize) -> Option<&Support> {
+        if self.cache.support[i].is_none() {
+            let computed = self.compute_support(i);
+            self.cache.support[i] = Some(computed);
+        }
+        self.cache.support[i].as_ref().and_then(Option::as_ref)
+    }
+
+    fn compute_support(&mut self, i: usize) -> Option<Support> {
+        let tau = self.data.chart_support;
+        if tau <= 0.0 {
+            return None;
+        }
+        let (n, k) = (self.charts(), self.batch_distortion());
+        let c = self.chart_probs();
+        let column: Vec<f32> = self.tape.value(c).iter().skip(i).step_by(n).copied().collect();
+        let mut rows: Vec<u32> = (0..column.len() as u32).filter(|&r| column[r as usize] >= tau).collect();
+        if rows.len() == column.len() {
+            return None;
+        }
+        let mut distortion = rows.partition_point(|&r| (r as usize) < k);
+        if distortion == 0 {
+            let best = (0..k).fold(0, |b, r| if column[r] > column[b] { r } else { b });
+            rows.insert(0, best as u32);
+            distortion = 1;
+        }
+        Some(Support { rows, distortion })
+    }
+
+    /// The rows of `v` (a `B×k` quantity of the 3-D samples) on chart `i`'s support, in the order of
+    /// [`Self::support_tex`]; `v` itself when the support is every sample.
+    pub fn on_support(&mut self, i: usize, v: Var) -> Var {
+        match self.support(i).map(|s| s.rows.clone()) {
+            Some(rows) => self.tape.gather_rows(v, &rows),
+            None => v,
+        }
+    }
+
+    /// Chart `i`'s probabilities `c(x)[i]` on the samples `samples` covers (a column).
+    pub fn chart_probs_on(&mut self, i: usize, samples: Samples) -> Var {
+        let c = self.chart_probs();
+        let column = self.tape.slice_cols(c, i, 1);
+        match samples {
+            Samples::All => column,
+            Samples::Support => self.on_support(i, column),
+            Samples::DistortionSupport => {
+                let on = self.on_support(i, column);
+                let rows = self.support_distortion_len(i);
+                self.tape.slice_rows(on, 0, rows)
+            }
+        }
+    }
+
+    /// How many distortion samples chart `i`'s support holds.
+    fn support_distortion_len(&mut self, i: usize) -> usize {
+        let k = self.batch_distortion();
+        self.support(i).map_or(k, |s| s.distortion)
+    }
+
+    /// Whether any chart is evaluated on fewer than every sample this step.
+    pub fn is_pruned(&mut self) -> bool {
+        (0..self.charts()).any(|i| self.support(i).is_some())
+    }
+
+    /// `t_i(x)` on chart `i`'s support: [`Self::tex`] when that is every sample. The losses whose
+    /// terms are weighted by `c(x)[i]` read this, so a term weighing less than `τ` costs nothing.
+    pub fn support_tex(&mut self, i: usize) -> Var {
+        if self.support(i).is_none() {
+            return self.tex(i);
+        }
+        cached!(self.support_tex[i], {
+            let x = self.x();
+            let x = self.on_support(i, x);
+            self.nets.texture(self.tape, i, x)
+        })
+    }
+
+    /// [`Self::uv_differentials`] on the distortion samples of chart `i`'s support.
+    pub fn support_uv_differentials(&mut self, i: usize) -> (Var, Var) {
+        let Some(rows) = self.support(i).map(|s| s.rows[..s.distortion].to_vec()) else {
+            return self.uv_differentials(i);
+        };
+        cached!(self.support_differentials[i], {
+            let t = self.support_tex(i);
+            let t = self.tape.slice_rows(t, 0, rows.len());
+            let (xp, xq) = self.offsets();
+            let (xp, xq) = (self.tape.gather_rows(xp, &rows), self.tape.gather_rows(xq, &rows));
+            let (tp, tq) = (self.nets.texture(self.tape, i, xp), self.nets.texture(self.tape, i, xq));
+            (self.tape.sub(tp, t), self.tape.sub(tq, t))
+        })
+    }
+
+    /// [`Self::cycle_points`] on chart `i`'s support.
+    pub fn support_cycle_points(&mut self, i: usize) -> Var {
+        if self.support(i).is_none() {
+            return self.cycle_points(i);
+        }
+        cached!(self.support_cycle_points[i], {
+            let t = self.support_tex(i);
+            self.nets.surface(self.tape, i, t)
         })
     }
 

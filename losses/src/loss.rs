@@ -2,7 +2,7 @@
 
 use nuvo_autodiff::Var;
 
-use crate::context::StepContext;
+use crate::context::{Samples, StepContext};
 
 /// Why a loss could not be built or evaluated.
 #[derive(Debug, thiserror::Error)]
@@ -29,19 +29,38 @@ pub trait Loss: Send + Sync {
 }
 
 /// `(1/|G|) Σ_x Σ_i c(x)[i] · d_i(x)`: the chart-probability-weighted batch mean that most of the
-/// paper's 3-D losses share. `per_chart[i]` is `d_i`, a column over the first `r ≤ B` samples
-/// (`r×1`; all `B` for most losses, the distortion samples for `conformal` and `stretch`), and the
-/// mean is over those `r`.
-pub fn chart_weighted_mean(ctx: &mut StepContext<'_>, per_chart: &[Var]) -> Var {
-    let rows = ctx.tape.shape(per_chart[0]).rows;
-    let all = ctx.chart_probs();
-    let c = if rows < ctx.batch_3d() { ctx.tape.slice_rows(all, 0, rows) } else { all };
-    let b = rows.max(1) as f32;
-    let t = &mut *ctx.tape;
-    let d = if per_chart.len() == 1 { per_chart[0] } else { t.concat_cols(per_chart) };
-    let w = t.mul(d, c);
-    let s = t.sum_all(w);
-    t.scale(s, 1.0 / b)
+/// paper's 3-D losses share. `per_chart[i]` is `d_i`, a column over the samples `samples` names for
+/// chart `i` (every sample; the chart's support; the distortion samples of its support), and the
+/// mean divides by the batch those are drawn from (`B`, or the `k` distortion samples), so the
+/// terms a support leaves out count as zero.
+pub fn chart_weighted_mean(ctx: &mut StepContext<'_>, per_chart: &[Var], samples: Samples) -> Var {
+    let whole = match samples {
+        Samples::All | Samples::Support => ctx.batch_3d(),
+        Samples::DistortionSupport => ctx.batch_distortion(),
+    };
+    let scale = 1.0 / whole.max(1) as f32;
+    if samples == Samples::All || !ctx.is_pruned() {
+        let all = ctx.chart_probs();
+        let c = if whole < ctx.batch_3d() { ctx.tape.slice_rows(all, 0, whole) } else { all };
+        let t = &mut *ctx.tape;
+        let d = if per_chart.len() == 1 { per_chart[0] } else { t.concat_cols(per_chart) };
+        let w = t.mul(d, c);
+        let s = t.sum_all(w);
+        return t.scale(s, scale);
+    }
+    let mut total: Option<Var> = None;
+    for (i, &d) in per_chart.iter().enumerate() {
+        let c = ctx.chart_probs_on(i, samples);
+        let t = &mut *ctx.tape;
+        let w = t.mul(d, c);
+        let s = t.sum_all(w);
+        total = Some(match total {
+            Some(acc) => t.add(acc, s),
+            None => s,
+        });
+    }
+    let total = total.expect("a Nuvo atlas has at least one chart");
+    ctx.tape.scale(total, scale)
 }
 
 /// Row-wise squared Euclidean distance `‖a − b‖²` (`B×k`, `B×k` → `B×1`).
@@ -50,4 +69,71 @@ pub fn squared_distance(ctx: &mut StepContext<'_>, a: Var, b: Var) -> Var {
     let d = t.sub(a, b);
     let sq = t.square(d);
     t.sum_each_row(sq)
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::builtin::{Conformal, Cycle3d, Stretch, StretchOptions, Texture};
+    use crate::testing::{Scene, check_loss_gradient_on};
+
+    /// Two samples on the plane, two charts that differ only in chart 1's lifted surface, and
+    /// `c(x) = (¼, ¾)` at the first sample, `(¾, ¼)` at the second.
+    fn crossing_charts() -> Scene {
+        let ln3 = 3.0f32.ln();
+        Scene::plane_points(&[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+            .with_two_charts_shifted_z(0.5)
+            .with_chart_logits_along_x(-2.0 * ln3, ln3)
+            .with_texture_shear(1.0)
+    }
+
+    #[test]
+    fn a_chart_support_leaves_out_exactly_the_terms_below_it() {
+        let full = crossing_charts();
+        let pruned = full.clone().with_chart_support(0.5);
+        // cycle_3d: chart 0 maps back exactly, chart 1 misses by 0.5; only chart 1 weighs ¾ at the
+        // first sample and ¼ at the second, and the support keeps the ¾.
+        let (f, p) = (full.evaluate(&Cycle3d), pruned.evaluate(&Cycle3d));
+        assert!((f - 0.125).abs() < 1e-6 && (p - 0.75 * 0.25 / 2.0).abs() < 1e-6, "{f} {p}");
+        // conformal: both charts shear to a squared cosine of ½; the support keeps ¾ of each sample.
+        let (f, p) = (full.evaluate(&Conformal), pruned.evaluate(&Conformal));
+        assert!((f - 0.5).abs() < 1e-3 && (p - 0.375).abs() < 1e-3, "{f} {p}");
+        // Below every probability, the support is every sample and nothing changes.
+        let all = full.clone().with_chart_support(0.2);
+        for loss in [&Cycle3d as &dyn crate::Loss, &Conformal, &Texture] {
+            assert_eq!(all.evaluate(loss).to_bits(), full.evaluate(loss).to_bits());
+        }
+    }
+
+    #[test]
+    fn a_chart_below_the_threshold_everywhere_keeps_its_most_probable_sample() {
+        // Above every probability: chart 0 keeps the second sample (¾), chart 1 the first (¾).
+        let pruned = crossing_charts().with_chart_support(0.9);
+        let p = pruned.evaluate(&Cycle3d);
+        assert!((p - 0.75 * 0.25 / 2.0).abs() < 1e-6, "{p}");
+        // With only the first sample carrying the distortion losses, chart 0 (¾ at the second sample
+        // only) also keeps the first, where it weighs ¼: conformal sees ¾·½ + ¼·½.
+        let first_only = crossing_charts().with_chart_support(0.5).with_distortion_samples(1);
+        let p = first_only.evaluate(&Conformal);
+        assert!((p - 0.5).abs() < 1e-3, "{p}");
+    }
+
+    #[test]
+    fn pruned_losses_have_exact_gradients() {
+        // Scene::generic's c(x)[1] is 0.46, 0.40, 0.47, 0.37 at its four samples: 0.43 keeps the
+        // first and third for chart 1 and every sample for chart 0; 0.9 keeps one sample per chart.
+        for tau in [0.43, 0.9] {
+            for k in [4, 2] {
+                let full = Scene::generic().with_distortion_samples(k);
+                let scene = full.clone().with_chart_support(tau);
+                assert!((scene.evaluate(&Cycle3d) - full.evaluate(&Cycle3d)).abs() > 1e-4, "nothing pruned");
+                check_loss_gradient_on(&scene, &Cycle3d);
+                check_loss_gradient_on(&scene, &Texture);
+                check_loss_gradient_on(&scene, &Conformal);
+                for relative in [false, true] {
+                    let options = StretchOptions { relative, ..Default::default() };
+                    check_loss_gradient_on(&scene, &Stretch::new(options));
+                }
+            }
+        }
+    }
 }

@@ -73,6 +73,8 @@ pub(crate) struct Scene {
     grid_res: usize,
     /// Tangent frames for the first this many samples only (the distortion samples); all if `None`.
     distortion_samples: Option<usize>,
+    /// `StepData::chart_support`.
+    chart_support: f32,
 }
 
 impl Scene {
@@ -91,6 +93,7 @@ impl Scene {
             grids: vec![Tensor::zeros(4, 3)],
             grid_res: 2,
             distortion_samples: None,
+            chart_support: 0.0,
         }
     }
 
@@ -151,6 +154,21 @@ impl Scene {
         self
     }
 
+    /// Evaluate the `c(x)`-weighted losses only where `c(x)[i] ≥ tau` (see `StepData`).
+    pub fn with_chart_support(mut self, tau: f32) -> Self {
+        self.chart_support = tau;
+        self
+    }
+
+    /// Chart 1's logit minus chart 0's becomes `slope·x + bias` (x the first coordinate), so the
+    /// chart probabilities vary across the samples. Needs two charts.
+    pub fn with_chart_logits_along_x(mut self, slope: f32, bias: f32) -> Self {
+        assert_eq!(self.tex.len(), 2, "with_chart_logits_along_x needs two charts");
+        self.chart_w = Tensor::from_vec(3, 2, vec![0.0, slope, 0.0, 0.0, 0.0, 0.0]);
+        self.chart_b = Tensor::from_vec(1, 2, vec![0.0, bias]);
+        self
+    }
+
     pub fn epsilon(&self) -> f32 {
         self.epsilon
     }
@@ -192,6 +210,7 @@ impl Scene {
             tangents_p: &p,
             tangents_q: &q,
             epsilon: self.epsilon,
+            chart_support: self.chart_support,
         };
         let mut ctx = StepContext::new(tape, &nets, data);
         loss.evaluate(&mut ctx).expect("built-in losses do not fail on a valid scene")
@@ -255,6 +274,7 @@ impl Scene {
                 .collect(),
             grid_res: 4,
             distortion_samples: None,
+            chart_support: 0.0,
         }
     }
 }

@@ -37,6 +37,14 @@ pub struct BenchArgs {
     /// `step`: the mesh to sample.
     #[arg(long, default_value = "assets/stanford-bunny.obj")]
     mesh: std::path::PathBuf,
+    /// `step`: time the steps of a trained run instead (its folder or checkpoint; its stored config,
+    /// its networks as trained), so settings that depend on the trained state (such as
+    /// `training.chart_support`) are timed as they run late in training. Ignores the sizing flags.
+    #[arg(long, value_name = "RUN")]
+    from: Option<std::path::PathBuf>,
+    /// `step --from`: override a value of the run's config, e.g. `--set training.chart_support=0`.
+    #[arg(long = "set", value_name = "KEY=VALUE", requires = "from")]
+    set: Vec<String>,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum, PartialEq)]
@@ -72,6 +80,9 @@ fn run_on_worker(args: &BenchArgs) -> anyhow::Result<()> {
 /// One full Nuvo training step (all eight losses, uniform samples of the mesh), timed, and the
 /// process's peak resident memory.
 fn step_case(args: &BenchArgs) -> anyhow::Result<()> {
+    if let Some(run) = &args.from {
+        return trained_step_case(args, run);
+    }
     let text = format!(
         "[geometry]\nsource = \"mesh\"\npath = {:?}\n[model]\ncharts = {}\ndepth = {}\nwidth = {}\n\
          [training]\nsteps = 1000\nbatch_3d = {}\nbatch_uv = {}\n",
@@ -92,15 +103,7 @@ fn step_case(args: &BenchArgs) -> anyhow::Result<()> {
     let (n, b) = (args.charts as f64, args.batch as f64);
     // Forward MACs: c(x), t_i at x and two offsets, s_i(t_i(x)); s_i(u), t_i(s_i(u)), c(s_i(u)).
     let fwd = 2.0 * (b * (c as f64 + 3.0 * n * t as f64 + n * s as f64) + b * n * (s + t + c) as f64);
-    trainer.step()?;
-    let mut times: Vec<f64> = (0..args.iters.max(1))
-        .map(|_| {
-            let start = Instant::now();
-            trainer.step().map(|_| start.elapsed().as_secs_f64())
-        })
-        .collect::<Result<_, _>>()?;
-    times.sort_by(f64::total_cmp);
-    let (median, min) = (times[times.len() / 2], times[0]);
+    let (median, min) = time_steps(&mut trainer, args.iters)?;
     println!(
         "nuvo step n={} {}×{} batch {}+{}: median {:.3} s  min {:.3} s  ~{:.0} GFLOP/step (3× forward)  {:.1} GFLOP/s  peak RSS {}",
         args.charts,
@@ -117,6 +120,29 @@ fn step_case(args: &BenchArgs) -> anyhow::Result<()> {
             .unwrap_or_else(|| "unknown".into())
     );
     Ok(())
+}
+
+/// Steps of a trained run, continued from its checkpoint (see `BenchArgs::from`).
+fn trained_step_case(args: &BenchArgs, run: &std::path::Path) -> anyhow::Result<()> {
+    let (mut trainer, _, ckpt) = crate::train::restore_run(run, &args.set)?;
+    let t = &trainer.config().training;
+    let sizes = format!("batch {}+{}, chart_support {}", t.batch_3d, t.batch_uv, t.chart_support);
+    let (median, min) = time_steps(&mut trainer, args.iters)?;
+    println!("nuvo step from {} ({sizes}): median {median:.3} s  min {min:.3} s", ckpt.display());
+    Ok(())
+}
+
+/// Median and minimum seconds per training step over `iters` steps, after one warm-up step.
+fn time_steps(trainer: &mut nuvo_core::Trainer, iters: usize) -> anyhow::Result<(f64, f64)> {
+    trainer.step()?;
+    let mut times: Vec<f64> = (0..iters.max(1))
+        .map(|_| {
+            let start = Instant::now();
+            trainer.step().map(|_| start.elapsed().as_secs_f64())
+        })
+        .collect::<Result<_, _>>()?;
+    times.sort_by(f64::total_cmp);
+    Ok((times[times.len() / 2], times[0]))
 }
 
 /// Median and minimum of `iters` timed runs of `f` after 3 warm-ups, in seconds.

@@ -74,16 +74,26 @@ pub fn train(args: &TrainArgs) -> anyhow::Result<()> {
 }
 
 pub fn bake(args: &BakeArgs) -> anyhow::Result<()> {
-    let ckpt_path = if args.run.is_dir() { args.run.join(files::CHECKPOINT) } else { args.run.clone() };
-    let ckpt = Checkpoint::load(&ckpt_path)?;
-    let loaded =
-        config::from_str_with_overrides(&ckpt_path.display().to_string(), &ckpt.config_toml, &args.set)
-            .with_context(|| format!("the config stored in {}", ckpt_path.display()))?;
-    let mut trainer = build_trainer(&loaded)?;
-    trainer.restore(&ckpt)?;
+    let (mut trainer, loaded, ckpt_path) = restore_run(&args.run, &args.set)?;
     let out =
         args.out.clone().unwrap_or_else(|| ckpt_path.parent().map(Path::to_path_buf).unwrap_or_default());
     bake_into(&mut trainer, &out, &loaded)
+}
+
+/// The trainer of a run (its folder or checkpoint file) as its checkpoint left it, built from the
+/// config stored in the checkpoint with `overrides` applied; also that config and the checkpoint's path.
+pub(crate) fn restore_run(
+    run: &Path,
+    overrides: &[String],
+) -> anyhow::Result<(Trainer, LoadedConfig, std::path::PathBuf)> {
+    let ckpt_path = if run.is_dir() { run.join(files::CHECKPOINT) } else { run.to_path_buf() };
+    let ckpt = Checkpoint::load(&ckpt_path)?;
+    let loaded =
+        config::from_str_with_overrides(&ckpt_path.display().to_string(), &ckpt.config_toml, overrides)
+            .with_context(|| format!("the config stored in {}", ckpt_path.display()))?;
+    let mut trainer = build_trainer(&loaded)?;
+    trainer.restore(&ckpt)?;
+    Ok((trainer, loaded, ckpt_path))
 }
 
 fn build_trainer(loaded: &LoadedConfig) -> anyhow::Result<Trainer> {
@@ -100,6 +110,10 @@ fn build_trainer(loaded: &LoadedConfig) -> anyhow::Result<Trainer> {
     );
     let terms: Vec<String> = trainer.terms().iter().map(|t| format!("{}×{}", t.name, t.weight)).collect();
     println!("losses: {}", terms.join(", "));
+    let tau = trainer.config().training.chart_support;
+    if tau > 0.0 {
+        println!("chart support: the c(x)-weighted losses evaluate chart i only where c(x)[i] ≥ {tau:e}");
+    }
     if let Some(w) = trainer.config().warm_start.as_ref().filter(|w| w.enabled()) {
         println!(
             "warm start: {} charts begin as {} projections, prior weight {} fading to 0 over {} steps",

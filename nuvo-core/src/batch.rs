@@ -48,8 +48,9 @@ impl StepBatch {
         Ok(StepBatch { points, normals, uv, tangents_p, tangents_q })
     }
 
-    /// The loss context's view of this batch.
-    pub fn data(&self, epsilon: f32) -> StepData<'_> {
+    /// The loss context's view of this batch, with the distortion step `ε` and the chart-support
+    /// threshold (see [`StepData`]).
+    pub fn data(&self, epsilon: f32, chart_support: f32) -> StepData<'_> {
         StepData {
             points: &self.points,
             normals: &self.normals,
@@ -57,6 +58,7 @@ impl StepBatch {
             tangents_p: &self.tangents_p,
             tangents_q: &self.tangents_q,
             epsilon,
+            chart_support,
         }
     }
 }

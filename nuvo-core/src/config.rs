@@ -141,6 +141,12 @@ pub struct TrainingConfig {
     /// in the paper when smaller: the first `batch_distortion` samples of the (random) batch.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub batch_distortion: Option<usize>,
+    /// Chart-support threshold `τ`: the `c(x)`-weighted losses (`cycle_3d`, `texture`, `conformal`,
+    /// `stretch`) evaluate chart `i`'s networks only on the samples where `c(x)[i] ≥ τ`, so a term
+    /// that would weigh less than `τ` costs no network pass (each skipped term changes its loss by
+    /// less than `τ` times its value). 0 (the default, the paper) evaluates every chart on every
+    /// sample. Not applied while the warm-start prior is on, when `c` is still soft. Not in the paper.
+    pub chart_support: f32,
     /// Stop early after this many minutes of training (results then depend on the machine's speed).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub time_budget_minutes: Option<f64>,
@@ -159,6 +165,7 @@ impl Default for TrainingConfig {
             batch_3d: 5000,
             batch_uv: 5000,
             batch_distortion: None,
+            chart_support: 0.0,
             time_budget_minutes: None,
             epsilon: 1e-2,
             checkpoint_every: 250,
@@ -594,6 +601,9 @@ impl ExperimentConfig {
                 ));
             }
         }
+        if !(0.0..1.0).contains(&t.chart_support) {
+            return Err(src.invalid("training.chart_support", "must be at least 0 and below 1"));
+        }
         if t.steps == 0 {
             return Err(src.invalid("training.steps", "must be at least 1"));
         }
@@ -730,6 +740,13 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("training.batch_distortion") && e.contains("at least 1"), "{e}");
+        for bad in ["1.0", "-1e-4", "nan"] {
+            let e = from_str("c.toml", &format!("{MINIMAL}[training]\nchart_support = {bad}\n"))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("training.chart_support") && e.contains("below 1"), "{bad}: {e}");
+        }
+        assert!(from_str("c.toml", &format!("{MINIMAL}[training]\nchart_support = 1e-4\n")).is_ok());
     }
 
     #[test]

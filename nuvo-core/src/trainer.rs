@@ -276,8 +276,9 @@ impl Trainer {
     fn record(&mut self, only: Option<usize>, values: &mut Vec<(String, f32)>) -> Result<Var, TrainError> {
         self.tape.reset();
         self.tape.params_mut().zero_grads();
-        let mut ctx =
-            StepContext::new(&mut self.tape, &self.model, self.batch.data(self.config.training.epsilon));
+        let training = &self.config.training;
+        let data = self.batch.data(training.epsilon, self.chart_support_at(self.step));
+        let mut ctx = StepContext::new(&mut self.tape, &self.model, data);
         let mut total: Option<Var> = None;
         for (k, term) in self.terms.iter().enumerate() {
             if only.is_some_and(|o| o != k) {
@@ -298,6 +299,15 @@ impl Trainer {
             }
         }
         Ok(total.unwrap_or_else(|| ctx.tape.constant(Shape::SCALAR, 0.0)))
+    }
+
+    /// `training.chart_support` at `step`: 0 while the warm-start prior still weighs in (its
+    /// chart probabilities are still soft, and it reads every chart everywhere anyway).
+    fn chart_support_at(&self, step: u64) -> f32 {
+        match &self.warm_start {
+            Some((_, cfg)) if cfg.weight_at(step) > 0.0 => 0.0,
+            _ => self.config.training.chart_support,
+        }
     }
 
     /// Which term's gradient is not finite: re-records the step one term at a time. Only runs after a

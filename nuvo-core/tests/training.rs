@@ -414,6 +414,25 @@ fn the_warm_start_term_is_logged_while_it_fades_and_then_leaves_the_objective() 
 }
 
 #[test]
+fn the_chart_support_waits_for_the_warm_start_then_prunes_deterministically() {
+    let params_after = |tau: f32, steps: usize| {
+        let mut cfg = small("[warm_start]\nsteps = 20\n");
+        cfg.config.training.chart_support = tau;
+        let mut t = trainer(&cfg);
+        for _ in 0..steps {
+            t.step().unwrap();
+        }
+        param_values(&t)
+    };
+    // While the prior weighs in, the threshold is not applied: bit-identical steps.
+    assert!(params_after(0.45, 20) == params_after(0.0, 20), "pruned during the warm start");
+    // Afterwards it is, and the same config still gives the same parameters.
+    let a = params_after(0.45, 30);
+    assert!(a != params_after(0.0, 30), "nothing was pruned");
+    assert!(a == params_after(0.45, 30), "not deterministic");
+}
+
+#[test]
 fn warm_start_mistakes_are_located() {
     for (text, key) in [
         ("[warm_start]\nmin_alignment = 1.5\n", "warm_start.min_alignment"),

@@ -2,7 +2,7 @@
 
 use nuvo_autodiff::{Shape, Var};
 
-use crate::context::StepContext;
+use crate::context::{Samples, StepContext};
 use crate::loss::{Loss, LossError, chart_weighted_mean, squared_distance};
 use crate::registry::{LossInfo, no_options};
 
@@ -42,7 +42,7 @@ impl Loss for Cluster {
                 squared_distance(ctx, x, mu)
             })
             .collect();
-        Ok(chart_weighted_mean(ctx, &per_chart))
+        Ok(chart_weighted_mean(ctx, &per_chart, Samples::All))
     }
 }
 

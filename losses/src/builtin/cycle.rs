@@ -2,7 +2,7 @@
 
 use nuvo_autodiff::Var;
 
-use crate::context::StepContext;
+use crate::context::{Samples, StepContext};
 use crate::loss::{Loss, LossError, chart_weighted_mean, squared_distance};
 use crate::registry::{LossInfo, no_options};
 
@@ -41,11 +41,12 @@ impl Loss for Cycle3d {
         let x = ctx.x();
         let per_chart: Vec<Var> = (0..ctx.charts())
             .map(|i| {
-                let back = ctx.cycle_points(i);
+                let back = ctx.support_cycle_points(i);
+                let x = ctx.on_support(i, x);
                 squared_distance(ctx, back, x)
             })
             .collect();
-        Ok(chart_weighted_mean(ctx, &per_chart))
+        Ok(chart_weighted_mean(ctx, &per_chart, Samples::Support))
     }
 }
 

@@ -4,7 +4,7 @@
 use nuvo_autodiff::Var;
 use serde::Deserialize;
 
-use crate::context::StepContext;
+use crate::context::{Samples, StepContext};
 use crate::loss::{Loss, LossError, chart_weighted_mean};
 use crate::registry::{LossInfo, OptionDoc, no_options, parse_options};
 
@@ -100,7 +100,7 @@ impl Loss for Conformal {
     fn evaluate(&self, ctx: &mut StepContext<'_>) -> Result<Var, LossError> {
         let per_chart: Vec<Var> = (0..ctx.charts())
             .map(|i| {
-                let (a, b) = ctx.uv_differentials(i);
+                let (a, b) = ctx.support_uv_differentials(i);
                 let t = &mut *ctx.tape;
                 let ab = t.mul(a, b);
                 let dot = t.sum_each_row(ab);
@@ -114,7 +114,7 @@ impl Loss for Conformal {
                 t.div(dot2, norms)
             })
             .collect();
-        Ok(chart_weighted_mean(ctx, &per_chart))
+        Ok(chart_weighted_mean(ctx, &per_chart, Samples::DistortionSupport))
     }
 }
 
@@ -131,10 +131,15 @@ fn parallelogram_area(ctx: &mut StepContext<'_>, a: Var, b: Var, signed: bool) -
 }
 
 impl Stretch {
+    /// The loss with these options (the registry builds it from a `[losses.stretch]` table).
+    pub fn new(options: StretchOptions) -> Self {
+        Stretch { options }
+    }
+
     /// Chart `i`'s parallelogram areas (`B×1`) in the units `options.area` asks for.
     fn areas(&self, ctx: &mut StepContext<'_>, i: usize) -> Var {
         let eps = ctx.data().epsilon;
-        let (a, b) = ctx.uv_differentials(i);
+        let (a, b) = ctx.support_uv_differentials(i);
         let area = parallelogram_area(ctx, a, b, self.options.signed);
         match self.options.area {
             AreaScale::Paper => area,
@@ -149,8 +154,8 @@ const SECOND_MOMENT_FLOOR: f32 = 1e-30;
 /// `1 − E[A]²/(E[A²] + floor)` with `c(x)`-weighted expectations over the charts' areas.
 fn relative_spread(ctx: &mut StepContext<'_>, areas: &[Var]) -> Var {
     let squares: Vec<Var> = areas.iter().map(|&a| ctx.tape.square(a)).collect();
-    let mean = chart_weighted_mean(ctx, areas);
-    let mean_square = chart_weighted_mean(ctx, &squares);
+    let mean = chart_weighted_mean(ctx, areas, Samples::DistortionSupport);
+    let mean_square = chart_weighted_mean(ctx, &squares, Samples::DistortionSupport);
     let t = &mut *ctx.tape;
     let mean2 = t.square(mean);
     let denominator = t.add_scalar(mean_square, SECOND_MOMENT_FLOOR);
@@ -173,7 +178,7 @@ impl Loss for Stretch {
                 ctx.tape.square(d)
             })
             .collect();
-        Ok(chart_weighted_mean(ctx, &per_chart))
+        Ok(chart_weighted_mean(ctx, &per_chart, Samples::DistortionSupport))
     }
 }
 

@@ -2,7 +2,7 @@
 
 use nuvo_autodiff::Var;
 
-use crate::context::StepContext;
+use crate::context::{Samples, StepContext};
 use crate::loss::{Loss, LossError, chart_weighted_mean, squared_distance};
 use crate::registry::{LossInfo, no_options};
 
@@ -27,13 +27,14 @@ impl Loss for Texture {
         let normals = ctx.normals();
         let per_chart: Vec<Var> = (0..ctx.charts())
             .map(|i| {
-                let uv = ctx.tex(i);
+                let uv = ctx.support_tex(i);
                 let (grid, res) = ctx.normal_grid(i);
                 let predicted = ctx.tape.grid_sample(grid, uv, res);
+                let normals = ctx.on_support(i, normals);
                 squared_distance(ctx, predicted, normals)
             })
             .collect();
-        Ok(chart_weighted_mean(ctx, &per_chart))
+        Ok(chart_weighted_mean(ctx, &per_chart, Samples::Support))
     }
 }
 
