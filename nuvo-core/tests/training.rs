@@ -433,6 +433,23 @@ fn the_chart_support_waits_for_the_warm_start_then_prunes_deterministically() {
 }
 
 #[test]
+fn pruned_steps_do_not_depend_on_the_thread_count() {
+    // Wide (128) and large enough that the weight-gradient products of the pruned, odd-sized
+    // batches take the engine's row-split GEMM path at inner sizes where its blocking matters.
+    let params_with = |threads: usize| {
+        let mut cfg = small("[warm_start]\nsteps = 5\n");
+        cfg.config.model.width = 128;
+        cfg.config.training.batch_3d = 1500;
+        cfg.config.training.chart_support = 0.45;
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        let mut t = trainer(&cfg);
+        pool.install(|| (0..12).for_each(|_| drop(t.step().unwrap())));
+        param_values(&t)
+    };
+    assert!(params_with(1) == params_with(2), "1 and 2 threads differ");
+}
+
+#[test]
 fn warm_start_mistakes_are_located() {
     for (text, key) in [
         ("[warm_start]\nmin_alignment = 1.5\n", "warm_start.min_alignment"),
