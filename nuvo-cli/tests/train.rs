@@ -124,6 +124,25 @@ fn bake_redoes_the_outputs_from_a_run_folder() {
 }
 
 #[test]
+fn bench_times_the_steps_of_a_trained_run_with_overrides() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = tiny_config(dir.path(), 4, 2);
+    let run_dir = dir.path().join("run");
+    assert!(run(nuvo().arg("train").arg(&cfg).arg("--out").arg(&run_dir).arg("--no-bake")).status.success());
+    let bench = |set: &str| {
+        run(nuvo().args(["bench", "step", "--iters", "2", "--from"]).arg(&run_dir).args(["--set", set]))
+    };
+    let out = bench("training.chart_support=0.25");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("chart_support 0.25") && text.contains("median"), "{text}");
+    let out = bench("training.chart_suport=0.25");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("training.chart_suport") && err.contains("chart_support"), "{err}");
+}
+
+#[test]
 fn config_mistakes_exit_non_zero_with_the_file_line_and_choices() {
     let dir = tempfile::tempdir().unwrap();
     let cfg = tiny_config(dir.path(), 5, 5);
