@@ -293,6 +293,21 @@ impl<'a> StepContext<'a> {
         self.cache.support[i].as_ref().and_then(Option::as_ref)
     }
 
+    /// The rows of `v` that `samples` names for chart `i` (`v` covers the batch, or the `k`
+    /// distortion samples for [`Samples::DistortionSupport`]), gathered; `v` itself when that is
+    /// all of them. Reads the cached support in place (no copy of its rows).
+    fn rows_of(&mut self, i: usize, v: Var, samples: Samples) -> Var {
+        if samples == Samples::All || self.support(i).is_none() {
+            return v;
+        }
+        let support = self.cache.support[i].as_ref().and_then(Option::as_ref).expect("computed above");
+        let rows = match samples {
+            Samples::DistortionSupport => &support.rows[..support.distortion],
+            _ => &support.rows[..],
+        };
+        self.tape.gather_rows(v, rows)
+    }
+
     fn compute_support(&mut self, i: usize) -> Option<Support> {
         let tau = self.data.chart_support;
         if tau <= 0.0 {
@@ -317,10 +332,7 @@ impl<'a> StepContext<'a> {
     /// The rows of `v` (a `B×k` quantity of the 3-D samples) on chart `i`'s support, in the order of
     /// [`Self::support_tex`]; `v` itself when the support is every sample.
     pub fn on_support(&mut self, i: usize, v: Var) -> Var {
-        match self.support(i).map(|s| s.rows.clone()) {
-            Some(rows) => self.tape.gather_rows(v, &rows),
-            None => v,
-        }
+        self.rows_of(i, v, Samples::Support)
     }
 
     /// Chart `i`'s probabilities `c(x)[i]` on the samples `samples` covers (a column).
@@ -328,20 +340,12 @@ impl<'a> StepContext<'a> {
         let c = self.chart_probs();
         let column = self.tape.slice_cols(c, i, 1);
         match samples {
-            Samples::All => column,
-            Samples::Support => self.on_support(i, column),
-            Samples::DistortionSupport => {
-                let on = self.on_support(i, column);
-                let rows = self.support_distortion_len(i);
-                self.tape.slice_rows(on, 0, rows)
+            Samples::DistortionSupport if self.support(i).is_none() => {
+                let k = self.batch_distortion();
+                self.tape.slice_rows(column, 0, k)
             }
+            _ => self.rows_of(i, column, samples),
         }
-    }
-
-    /// How many distortion samples chart `i`'s support holds.
-    fn support_distortion_len(&mut self, i: usize) -> usize {
-        let k = self.batch_distortion();
-        self.support(i).map_or(k, |s| s.distortion)
     }
 
     /// Whether any chart is evaluated on fewer than every sample this step.
@@ -364,14 +368,15 @@ impl<'a> StepContext<'a> {
 
     /// [`Self::uv_differentials`] on the distortion samples of chart `i`'s support.
     pub fn support_uv_differentials(&mut self, i: usize) -> (Var, Var) {
-        let Some(rows) = self.support(i).map(|s| s.rows[..s.distortion].to_vec()) else {
+        if self.support(i).is_none() {
             return self.uv_differentials(i);
-        };
+        }
         cached!(self.support_differentials[i], {
             let t = self.support_tex(i);
-            let t = self.tape.slice_rows(t, 0, rows.len());
             let (xp, xq) = self.offsets();
-            let (xp, xq) = (self.tape.gather_rows(xp, &rows), self.tape.gather_rows(xq, &rows));
+            let xp = self.rows_of(i, xp, Samples::DistortionSupport);
+            let xq = self.rows_of(i, xq, Samples::DistortionSupport);
+            let t = self.tape.slice_rows(t, 0, self.tape.shape(xp).rows);
             let (tp, tq) = (self.nets.texture(self.tape, i, xp), self.nets.texture(self.tape, i, xq));
             (self.tape.sub(tp, t), self.tape.sub(tq, t))
         })

@@ -5,7 +5,7 @@ use std::io::Write;
 use std::path::Path;
 
 mod common;
-use common::{nuvo, run, tiny_config, tiny_config_for};
+use common::{nuvo, run, tiny_config, tiny_config_for, train_unbaked};
 
 /// The last `peak RSS N MB` that `nuvo train` printed (after training, and after baking).
 fn peak_rss_mb(stdout: &[u8]) -> u64 {
@@ -25,7 +25,7 @@ fn memory_stays_flat_over_thousands_of_steps() {
     for steps in [300, 3000] {
         let cfg = tiny_config(dir.path(), steps, 1000);
         let out = dir.path().join(format!("s{steps}"));
-        let o = run(nuvo().arg("train").arg(&cfg).arg("--out").arg(&out).arg("--no-bake"));
+        let o = train_unbaked(&cfg, &out);
         assert!(o.status.success());
         peaks.push(peak_rss_mb(&o.stdout));
     }

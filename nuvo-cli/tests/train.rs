@@ -5,7 +5,7 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{nuvo, run, tiny_config};
+use common::{nuvo, run, tiny_config, train_unbaked};
 
 #[test]
 fn train_writes_every_output_a_script_relies_on() {
@@ -56,7 +56,7 @@ fn a_run_killed_mid_way_resumes_to_the_same_parameters() {
     let dir = tempfile::tempdir().unwrap();
     let cfg = tiny_config(dir.path(), 80, 10);
     let full = dir.path().join("full");
-    assert!(run(nuvo().arg("train").arg(&cfg).arg("--out").arg(&full).arg("--no-bake")).status.success());
+    assert!(train_unbaked(&cfg, &full).status.success());
 
     let killed = dir.path().join("killed");
     let mut child = nuvo().arg("train").arg(&cfg).arg("--out").arg(&killed).arg("--no-bake").spawn().unwrap();
@@ -99,7 +99,7 @@ fn bake_redoes_the_outputs_from_a_run_folder() {
     let dir = tempfile::tempdir().unwrap();
     let cfg = tiny_config(dir.path(), 6, 3);
     let run_dir = dir.path().join("run");
-    assert!(run(nuvo().arg("train").arg(&cfg).arg("--out").arg(&run_dir).arg("--no-bake")).status.success());
+    assert!(train_unbaked(&cfg, &run_dir).status.success());
     assert!(!run_dir.join("atlas.obj").exists());
     let baked = dir.path().join("baked");
     // From another working directory: the run folder is self-contained.
@@ -128,7 +128,7 @@ fn bench_times_the_steps_of_a_trained_run_with_overrides() {
     let dir = tempfile::tempdir().unwrap();
     let cfg = tiny_config(dir.path(), 4, 2);
     let run_dir = dir.path().join("run");
-    assert!(run(nuvo().arg("train").arg(&cfg).arg("--out").arg(&run_dir).arg("--no-bake")).status.success());
+    assert!(train_unbaked(&cfg, &run_dir).status.success());
     let bench = |set: &str| {
         run(nuvo().args(["bench", "step", "--iters", "2", "--from"]).arg(&run_dir).args(["--set", set]))
     };
@@ -220,7 +220,7 @@ fn repeated_kills_while_checkpointing_every_step_still_resume_to_the_same_parame
     let dir = tempfile::tempdir().unwrap();
     let cfg = tiny_config(dir.path(), 60, 1);
     let full = dir.path().join("full");
-    assert!(run(nuvo().arg("train").arg(&cfg).arg("--out").arg(&full).arg("--no-bake")).status.success());
+    assert!(train_unbaked(&cfg, &full).status.success());
     let killed = dir.path().join("killed");
     let log = killed.join("log.jsonl");
     for (round, lines) in [7usize, 19, 26, 38, 51].into_iter().enumerate() {

@@ -54,6 +54,11 @@ render_resolution = 96
     p
 }
 
+/// `nuvo train CFG --out OUT --no-bake`, run to completion: a run folder without the atlas outputs.
+pub fn train_unbaked(cfg: &Path, out: &Path) -> Output {
+    run(nuvo().arg("train").arg(cfg).arg("--out").arg(out).arg("--no-bake"))
+}
+
 pub fn run(cmd: &mut Command) -> Output {
     let out = cmd.output().expect("nuvo runs");
     if !out.status.success() {
