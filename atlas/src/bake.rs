@@ -27,6 +27,12 @@
 //! cannot add a flip); a face no chart accepts stays where it was. Only overlapping faces move, so
 //! a sloppy surface network elsewhere does not cut the charts up. On the bunny this removes most
 //! overlapping faces and changes no score (BENCHMARKS.md, "Round-trip check").
+//!
+//! **Untangling** (not in the paper; optional, [`BakeOptions::untangle`]). After the charts are
+//! chosen, faces the wrong way round in their chart (fold-overs, mostly tiny triangles on creases of
+//! a scanned surface) are turned back by moving single UV vertices inside their chart
+//! ([`crate::untangle`]). The flipped-face count never rises, and only UVs of vertices of
+//! flipped faces move.
 
 use std::collections::HashMap;
 
@@ -35,6 +41,7 @@ use serde::Serialize;
 
 use crate::error::AtlasError;
 use crate::pack::AtlasLayout;
+use crate::untangle::{UntangleReport, untangle};
 use crate::uvstats::{UvStats, analyse_uv};
 use crate::vecmath::signed_area2_2d;
 
@@ -57,6 +64,13 @@ pub struct RoundTrip<'a> {
     pub distances: &'a [f32],
     /// Largest accepted distance; a positive finite number.
     pub tolerance: f32,
+}
+
+/// How the bake post-processes the chart map (each option is off by default: the paper's bake).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BakeOptions {
+    /// Move UV vertices so faces flipped in their chart turn back (module docs, [`crate::untangle`]).
+    pub untangle: bool,
 }
 
 /// A baked mesh and what the bake found.
@@ -93,6 +107,8 @@ pub struct BakeReport {
     pub mixed_faces: usize,
     /// Faces the round-trip check moved off their most probable chart (0 without the check).
     pub reassigned_faces: usize,
+    /// What untangling did (all zero when it is off).
+    pub untangle: UntangleReport,
 }
 
 /// Bakes per-vertex chart probabilities and chart UVs of `mesh` into one UV layer in the atlas
@@ -104,6 +120,7 @@ pub fn bake(
     fields: &ChartFields<'_>,
     n_charts: usize,
     layout: &AtlasLayout,
+    options: &BakeOptions,
 ) -> Result<Baked, AtlasError> {
     check_inputs(mesh, fields, n_charts, layout)?;
     let n = n_charts;
@@ -122,6 +139,15 @@ pub fn bake(
             analysis = analyse_uv(&layer.mesh, Some(&face_chart), layout.resolution)?;
         }
     }
+    let mut untangled = UntangleReport::default();
+    if options.untangle && !analysis.flipped.is_empty() {
+        if let Some(uv) = layer.mesh.uv.as_mut() {
+            untangled = untangle(uv, &face_chart);
+        }
+        if untangled.moves > 0 {
+            analysis = analyse_uv(&layer.mesh, Some(&face_chart), layout.resolution)?;
+        }
+    }
     let mixed_faces = mesh
         .triangles
         .iter()
@@ -136,6 +162,7 @@ pub fn bake(
         corners_outside_chart: layer.corners_outside_chart,
         mixed_faces,
         reassigned_faces,
+        untangle: untangled,
     };
     Ok(Baked { mesh: layer.mesh, face_chart, vertex_chart, report })
 }
@@ -289,6 +316,7 @@ fn argmax(values: impl Iterator<Item = f32>) -> u32 {
 mod tests {
     use super::*;
     use crate::testmesh::grid;
+    use crate::untangle::UntangleReport;
 
     /// Inputs without the round-trip check.
     fn plain<'a>(probs: &'a [f32], uvs: &'a [f32]) -> ChartFields<'a> {
@@ -315,7 +343,7 @@ mod tests {
     fn every_face_keeps_its_vertices_and_every_corner_gets_its_face_charts_uv() {
         let (m, probs, uvs) = two_chart_inputs();
         let layout = AtlasLayout::grid(2, 256, 2).unwrap();
-        let b = bake(&m, &plain(&probs, &uvs), 2, &layout).unwrap();
+        let b = bake(&m, &plain(&probs, &uvs), 2, &layout, &BakeOptions::default()).unwrap();
         assert_eq!(b.mesh.triangles, m.triangles, "faces dropped, duplicated or reordered");
         assert_eq!(b.mesh.positions, m.positions);
         b.mesh.validate().unwrap();
@@ -362,7 +390,9 @@ mod tests {
         // Vertex argmaxes: 0, 1, 1 (a per-corner vote would say 1); sums: 1.5, 1.2, 0.3 → chart 0.
         let probs = [0.9, 0.0, 0.1, 0.3, 0.6, 0.1, 0.3, 0.6, 0.1];
         let uvs = [0.5f32; 18];
-        let b = bake(&m, &plain(&probs, &uvs), 3, &AtlasLayout::grid(3, 64, 1).unwrap()).unwrap();
+        let b =
+            bake(&m, &plain(&probs, &uvs), 3, &AtlasLayout::grid(3, 64, 1).unwrap(), &BakeOptions::default())
+                .unwrap();
         assert_eq!(b.face_chart, vec![0]);
         assert_eq!(b.vertex_chart, vec![0, 1, 1]);
         assert_eq!(b.report.mixed_faces, 1);
@@ -373,10 +403,42 @@ mod tests {
         // Chart 0's map folded along x = -0.75: u = |x + 0.75|, so the strip x < -0.75 (16 faces, a
         // minority of chart 0) is mirrored onto its neighbour.
         let (m, probs, uvs, _) = folded_with_round_trip();
-        let b = bake(&m, &plain(&probs, &uvs), 2, &AtlasLayout::grid(2, 256, 2).unwrap()).unwrap();
+        let b = bake(
+            &m,
+            &plain(&probs, &uvs),
+            2,
+            &AtlasLayout::grid(2, 256, 2).unwrap(),
+            &BakeOptions::default(),
+        )
+        .unwrap();
         assert_eq!(b.report.flipped_faces.len(), 16, "{:?}", b.report.flipped_faces);
         assert!(b.report.flipped_faces.iter().all(|&f| m.corners(f as usize).iter().all(|c| c[0] <= -0.75)));
         assert!(!b.report.overlapping_faces.is_empty());
+    }
+
+    #[test]
+    fn untangling_turns_the_folded_strip_back_and_moves_only_its_uvs() {
+        let (m, probs, uvs, _) = folded_with_round_trip();
+        let l = AtlasLayout::grid(2, 256, 2).unwrap();
+        let fields = plain(&probs, &uvs);
+        let plain = bake(&m, &fields, 2, &l, &BakeOptions::default()).unwrap();
+        let b = bake(&m, &fields, 2, &l, &BakeOptions { untangle: true }).unwrap();
+        assert_eq!(plain.report.untangle, UntangleReport::default(), "off by default");
+        assert_eq!(b.report.untangle.flipped_before, 16);
+        assert_eq!(b.report.untangle.flipped_after, 0, "{:?}", b.report.untangle);
+        assert_eq!(b.report.flipped_faces, Vec::<u32>::new());
+        assert_eq!(b.face_chart, plain.face_chart, "charts are not changed");
+        // Only UVs of vertices of the strip's faces (x ≤ −0.5) moved.
+        let (uv_b, uv_p) = (b.mesh.uv.as_ref().unwrap(), plain.mesh.uv.as_ref().unwrap());
+        for (f, t) in m.triangles.iter().enumerate() {
+            for (k, &v) in t.iter().enumerate() {
+                let (pb, pp) =
+                    (uv_b.coords[uv_b.triangles[f][k] as usize], uv_p.coords[uv_p.triangles[f][k] as usize]);
+                if m.positions[v as usize][0] > -0.5 {
+                    assert_eq!(pb, pp, "face {f} corner {k}");
+                }
+            }
+        }
     }
 
     /// [`two_chart_inputs`] with chart 0's map folded along x = −0.75 (u = |x + 0.75|: the strip
@@ -393,14 +455,27 @@ mod tests {
 
     fn bake_checked(m: &TriMesh, probs: &[f32], uvs: &[f32], distances: &[f32]) -> Baked {
         let rt = RoundTrip { distances, tolerance: 0.5 };
-        bake(m, &ChartFields { probs, uvs, round_trip: Some(rt) }, 2, &AtlasLayout::grid(2, 256, 2).unwrap())
-            .unwrap()
+        bake(
+            m,
+            &ChartFields { probs, uvs, round_trip: Some(rt) },
+            2,
+            &AtlasLayout::grid(2, 256, 2).unwrap(),
+            &BakeOptions::default(),
+        )
+        .unwrap()
     }
 
     #[test]
     fn overlapping_faces_failing_the_round_trip_move_to_a_chart_that_passes_it() {
         let (m, probs, uvs, d) = folded_with_round_trip();
-        let plain = bake(&m, &plain(&probs, &uvs), 2, &AtlasLayout::grid(2, 256, 2).unwrap()).unwrap();
+        let plain = bake(
+            &m,
+            &plain(&probs, &uvs),
+            2,
+            &AtlasLayout::grid(2, 256, 2).unwrap(),
+            &BakeOptions::default(),
+        )
+        .unwrap();
         assert_eq!(plain.report.flipped_faces.len(), 16);
         let b = bake_checked(&m, &probs, &uvs, &d);
         for f in 0..m.triangles.len() {
@@ -417,7 +492,14 @@ mod tests {
     #[test]
     fn faces_that_do_not_overlap_would_flip_or_fail_everywhere_stay() {
         let (m, probs, uvs, d) = folded_with_round_trip();
-        let plain = bake(&m, &plain(&probs, &uvs), 2, &AtlasLayout::grid(2, 256, 2).unwrap()).unwrap();
+        let plain = bake(
+            &m,
+            &plain(&probs, &uvs),
+            2,
+            &AtlasLayout::grid(2, 256, 2).unwrap(),
+            &BakeOptions::default(),
+        )
+        .unwrap();
         // Chart 0 failing also where nothing overlaps (x > −0.5): those faces stay.
         let d_wide: Vec<f32> = d
             .chunks(2)
@@ -452,9 +534,15 @@ mod tests {
         let d = vec![0.0f32; m.positions.len() * 2];
         let with = |distances: &[f32], tolerance: f32| {
             let rt = RoundTrip { distances, tolerance };
-            bake(&m, &ChartFields { probs: &probs, uvs: &uvs, round_trip: Some(rt) }, 2, &l)
-                .map(|_| ())
-                .map_err(|e| e.to_string())
+            bake(
+                &m,
+                &ChartFields { probs: &probs, uvs: &uvs, round_trip: Some(rt) },
+                2,
+                &l,
+                &BakeOptions::default(),
+            )
+            .map(|_| ())
+            .map_err(|e| e.to_string())
         };
         assert!(with(&d[1..], 0.5).unwrap_err().contains("round-trip distances have"));
         assert!(with(&d, 0.0).unwrap_err().contains("tolerance"));
@@ -469,12 +557,12 @@ mod tests {
     fn bad_shapes_and_values_are_errors_naming_the_entry() {
         let (m, probs, uvs) = two_chart_inputs();
         let l = AtlasLayout::grid(2, 64, 1).unwrap();
-        assert!(bake(&m, &plain(&probs[1..], &uvs), 2, &l).is_err());
-        assert!(bake(&m, &plain(&probs, &uvs[1..]), 2, &l).is_err());
-        assert!(bake(&m, &plain(&probs, &uvs), 3, &l).is_err());
+        assert!(bake(&m, &plain(&probs[1..], &uvs), 2, &l, &BakeOptions::default()).is_err());
+        assert!(bake(&m, &plain(&probs, &uvs[1..]), 2, &l, &BakeOptions::default()).is_err());
+        assert!(bake(&m, &plain(&probs, &uvs), 3, &l, &BakeOptions::default()).is_err());
         let mut nan = uvs.clone();
         nan[4 * 3 + 3] = f32::NAN;
-        let e = bake(&m, &plain(&probs, &nan), 2, &l).unwrap_err().to_string();
+        let e = bake(&m, &plain(&probs, &nan), 2, &l, &BakeOptions::default()).unwrap_err().to_string();
         assert!(e.contains("vertex 3 chart 1"), "{e}");
     }
 }

@@ -12,6 +12,7 @@
 //! | [`mod@render`], [`camera`] | z-buffer rasteriser producing triangle id / barycentrics / depth |
 //! | [`metrics`] | Boundary, Stretch, Conformal, Editability over seeded views (definitions there) |
 //! | [`uvstats`] | charts, flips, utilisation and overlaps of a UV layout |
+//! | [`untangle`] | turning flipped faces back by moving single UV vertices (the bake's option) |
 //! | [`load`] | choosing the mesh reader by extension |
 //!
 //! The exact metric definitions and defaults are in the [`metrics`] and [`uvstats`] module docs and
@@ -32,10 +33,11 @@ mod raster;
 pub mod render;
 #[cfg(test)]
 mod testmesh;
+pub mod untangle;
 pub mod uvstats;
 mod vecmath;
 
-pub use bake::{Baked, ChartFields, RoundTrip, bake};
+pub use bake::{BakeOptions, Baked, ChartFields, RoundTrip, bake};
 pub use camera::{Camera, orbit_views};
 pub use error::AtlasError;
 pub use metrics::{EvalOptions, Metrics, evaluate};

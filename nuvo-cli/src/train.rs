@@ -141,16 +141,18 @@ fn print_report(report: &OutputReport, seconds: f64) {
             "atlas ({:.1} s): Boundary {:.4}  Stretch {:.4}  Conformal {:.4}  Editability {:.4}  ({} views)",
             seconds, i.boundary, i.stretch, i.conformal, i.editability, i.views_used
         );
+        let b = &m.bake;
         println!(
-            "       UV charts {}, utilisation {:.3}, flipped {} faces ({} on creases of the mesh), overlapping {} faces, \
-             faces per chart {:?} ({} moved by the round-trip check)",
+            "       UV charts {}, utilisation {:.3}, flipped {} faces ({} on creases of the mesh; {} before untangling), \
+             overlapping {} faces, faces per chart {:?} ({} moved by the round-trip check)",
             u.charts,
             u.utilisation,
-            m.bake.flipped_faces,
-            m.bake.flipped_on_creases,
-            m.bake.overlapping_faces,
-            m.bake.faces_per_chart,
-            m.bake.reassigned_faces
+            b.flipped_faces,
+            b.flipped_on_creases,
+            b.flipped_before_untangle,
+            b.overlapping_faces,
+            b.faces_per_chart,
+            b.reassigned_faces
         );
     }
     for f in &report.files {

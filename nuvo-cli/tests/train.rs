@@ -109,13 +109,31 @@ fn bake_redoes_the_outputs_from_a_run_folder() {
     let metrics = |dir: &Path| -> serde_json::Value {
         serde_json::from_slice(&std::fs::read(dir.join("metrics.json")).unwrap()).unwrap()
     };
-    assert_eq!(metrics(&baked)["bake"]["reassigned_faces"], 0, "the round-trip check is off by default");
+    let plain = metrics(&baked);
+    assert_eq!(plain["bake"]["reassigned_faces"], 0, "the round-trip check is off by default");
+    assert_eq!(plain["bake"]["untangle_moves"], 0, "untangling is off by default");
+    assert_eq!(plain["bake"]["flipped_before_untangle"], plain["bake"]["flipped_faces"]);
     // `--set` edits the stored config for this bake; a typo is named.
     let checked = dir.path().join("checked");
-    let set = ["--set", "output.round_trip_tolerance=0.1", "--set", "output.renders=0"];
+    let set = [
+        "--set",
+        "output.round_trip_tolerance=0.1",
+        "--set",
+        "output.renders=0",
+        "--set",
+        "output.untangle=true",
+    ];
     let out = run(nuvo().arg("bake").arg(&run_dir).args(set).arg("--out").arg(&checked));
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    assert!(metrics(&checked)["bake"]["reassigned_faces"].is_u64());
+    let bake = &metrics(&checked)["bake"];
+    assert!(bake["reassigned_faces"].is_u64());
+    // A 6-step run folds plenty; untangling turns faces back and never adds a flip.
+    let count = |key: &str| bake[key].as_u64().unwrap();
+    assert!(count("flipped_before_untangle") > 0, "{bake}");
+    assert!(
+        count("untangle_moves") > 0 && count("flipped_faces") < count("flipped_before_untangle"),
+        "{bake}"
+    );
     assert!(!checked.join("renders").exists(), "output.renders=0 was not applied");
     let out = run(nuvo().arg("bake").arg(&run_dir).args(["--set", "output.round_trip_tolerans=0.1"]));
     assert!(!out.status.success());

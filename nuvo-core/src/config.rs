@@ -248,6 +248,11 @@ pub struct OutputConfig {
     /// overlapping faces of the bunny's atlas at no cost to the scores, but on unruly meshes it
     /// cuts the charts up (BENCHMARKS.md, "Round-trip check").
     pub round_trip_tolerance: f32,
+    /// Untangle the bake (not in the paper; `nuvo_atlas::untangle`): move single UV vertices so that
+    /// faces the wrong way round in their chart (fold-overs, mostly tiny triangles on creases of a
+    /// scanned surface, where a smooth map of 3-D position cannot help mirroring them) turn back.
+    /// The flipped-face count never rises. Off by default, as the paper bakes the map as it is.
+    pub untangle: bool,
     /// Views of the metrics (the paper's protocol: random views on a sphere).
     pub eval_views: usize,
     /// Side of each metrics view in pixels.
@@ -267,6 +272,7 @@ impl Default for OutputConfig {
             atlas_resolution: 2048,
             gutter: 4,
             round_trip_tolerance: 0.0,
+            untangle: false,
             eval_views: 16,
             eval_resolution: 800,
             renders: 4,
@@ -758,6 +764,20 @@ mod tests {
         let c = from_str_with_overrides("c.toml", MINIMAL, &sets).unwrap();
         assert_eq!(c.config.output.round_trip_tolerance, 0.1);
         assert!(c.source.is_overridden("output.round_trip_tolerance"));
+    }
+
+    #[test]
+    fn untangle_is_off_by_default_and_a_boolean() {
+        assert!(!from_str("c.toml", MINIMAL).unwrap().config.output.untangle);
+        assert!(
+            from_str("c.toml", &format!("{MINIMAL}[output]\nuntangle = true\n"))
+                .unwrap()
+                .config
+                .output
+                .untangle
+        );
+        let e = from_str("c.toml", &format!("{MINIMAL}[output]\nuntangle = 1\n")).unwrap_err().to_string();
+        assert!(e.contains("untangle"), "{e}");
     }
 
     #[test]

@@ -18,7 +18,7 @@
 use std::path::{Path, PathBuf};
 
 use nuvo_atlas::AtlasError;
-use nuvo_atlas::bake::{BakeReport, ChartFields, RoundTrip, bake};
+use nuvo_atlas::bake::{BakeOptions, BakeReport, ChartFields, RoundTrip, bake};
 use nuvo_atlas::camera::orbit_views;
 use nuvo_atlas::export::{GlbOptions, write_glb, write_obj};
 use nuvo_atlas::metrics::{EvalOptions, Metrics, evaluate};
@@ -74,6 +74,10 @@ pub struct BakeSummary {
     pub mixed_faces: usize,
     /// Faces the round-trip check moved to another chart (`output.round_trip_tolerance`).
     pub reassigned_faces: usize,
+    /// Flipped faces before untangling (`output.untangle`; equal to `flipped_faces` without it).
+    pub flipped_before_untangle: usize,
+    /// UV vertex moves untangling made.
+    pub untangle_moves: usize,
     /// Faces per chart.
     pub faces_per_chart: Vec<usize>,
 }
@@ -138,7 +142,14 @@ fn bake_and_measure(
     let layout = AtlasLayout::grid(n, opts.atlas_resolution, opts.gutter)?;
     let round_trip = (opts.round_trip_tolerance > 0.0)
         .then(|| RoundTrip { distances: &fields.round_trip, tolerance: opts.round_trip_tolerance });
-    let baked = bake(mesh, &ChartFields { probs: &fields.probs, uvs: &fields.uvs, round_trip }, n, &layout)?;
+    let options = BakeOptions { untangle: opts.untangle };
+    let baked = bake(
+        mesh,
+        &ChartFields { probs: &fields.probs, uvs: &fields.uvs, round_trip },
+        n,
+        &layout,
+        &options,
+    )?;
     let mut files = Vec::new();
     let path = |name: &str| dir.join(name);
 
@@ -194,6 +205,12 @@ fn summarize(r: &BakeReport, face_chart: &[u32], n: usize) -> BakeSummary {
         corners_outside_chart: r.corners_outside_chart,
         mixed_faces: r.mixed_faces,
         reassigned_faces: r.reassigned_faces,
+        flipped_before_untangle: if r.untangle.moves > 0 {
+            r.untangle.flipped_before
+        } else {
+            r.flipped_faces.len()
+        },
+        untangle_moves: r.untangle.moves,
         faces_per_chart,
     }
 }
