@@ -142,14 +142,18 @@ fn print_report(report: &OutputReport, seconds: f64) {
             seconds, i.boundary, i.stretch, i.conformal, i.editability, i.views_used
         );
         let b = &m.bake;
+        let untangled = if b.untangle_moves > 0 {
+            format!("; {} before untangling", b.flipped_before_untangle)
+        } else {
+            String::new()
+        };
         println!(
-            "       UV charts {}, utilisation {:.3}, flipped {} faces ({} on creases of the mesh; {} before untangling), \
+            "       UV charts {}, utilisation {:.3}, flipped {} faces ({} on creases of the mesh{untangled}), \
              overlapping {} faces, faces per chart {:?} ({} moved by the round-trip check)",
             u.charts,
             u.utilisation,
             b.flipped_faces,
             b.flipped_on_creases,
-            b.flipped_before_untangle,
             b.overlapping_faces,
             b.faces_per_chart,
             b.reassigned_faces
