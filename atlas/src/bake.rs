@@ -141,8 +141,7 @@ pub fn bake(
     }
     let mut untangled = UntangleReport::default();
     if options.untangle && !analysis.flipped.is_empty() {
-        let tiles: Vec<[[f32; 2]; 2]> =
-            layout.charts.iter().map(|c| [c.offset, c.offset.map(|o| o + c.scale)]).collect();
+        let tiles: Vec<[[f32; 2]; 2]> = (0..n).map(|c| layout.chart_bounds(c)).collect();
         if let Some(uv) = layer.mesh.uv.as_mut() {
             untangled = untangle(uv, &face_chart, &tiles)?;
         }
@@ -405,14 +404,7 @@ mod tests {
         // Chart 0's map folded along x = -0.75: u = |x + 0.75|, so the strip x < -0.75 (16 faces, a
         // minority of chart 0) is mirrored onto its neighbour.
         let (m, probs, uvs, _) = folded_with_round_trip();
-        let b = bake(
-            &m,
-            &plain(&probs, &uvs),
-            2,
-            &AtlasLayout::grid(2, 256, 2).unwrap(),
-            &BakeOptions::default(),
-        )
-        .unwrap();
+        let b = bake_two(&m, &plain(&probs, &uvs), BakeOptions::default());
         assert_eq!(b.report.flipped_faces.len(), 16, "{:?}", b.report.flipped_faces);
         assert!(b.report.flipped_faces.iter().all(|&f| m.corners(f as usize).iter().all(|c| c[0] <= -0.75)));
         assert!(!b.report.overlapping_faces.is_empty());
@@ -421,10 +413,9 @@ mod tests {
     #[test]
     fn untangling_turns_the_folded_strip_back_inside_its_tile_and_moves_only_its_uvs() {
         let (m, probs, uvs, _) = folded_with_round_trip();
-        let l = AtlasLayout::grid(2, 256, 2).unwrap();
         let fields = plain(&probs, &uvs);
-        let plain = bake(&m, &fields, 2, &l, &BakeOptions::default()).unwrap();
-        let b = bake(&m, &fields, 2, &l, &BakeOptions { untangle: true }).unwrap();
+        let plain = bake_two(&m, &fields, BakeOptions::default());
+        let b = bake_two(&m, &fields, BakeOptions { untangle: true });
         assert_eq!(plain.report.untangle, UntangleReport::default(), "off by default");
         // The strip's fold line is chart 0's edge u = 0, so the strip cannot unfold by going past
         // it: it has to turn back inside chart 0's square, which single moves nearly always do.
@@ -434,7 +425,7 @@ mod tests {
         assert_eq!(b.report.flipped_faces.len(), r.flipped_after, "the report counts as uvstats does");
         assert_eq!(b.face_chart, plain.face_chart, "charts are not changed");
         let uv_b = b.mesh.uv.as_ref().unwrap();
-        let tile = [l.charts[0].offset, l.charts[0].offset.map(|o| o + l.charts[0].scale)];
+        let tile = AtlasLayout::grid(2, 256, 2).unwrap().chart_bounds(0);
         for (f, t) in uv_b.triangles.iter().enumerate().filter(|&(f, _)| b.face_chart[f] == 0) {
             for p in t.map(|i| uv_b.coords[i as usize]) {
                 assert!(
@@ -468,29 +459,20 @@ mod tests {
         (m, probs, uvs, d)
     }
 
+    /// The two-chart fixtures baked into a 256² atlas with a 2-texel gutter.
+    fn bake_two(m: &TriMesh, fields: &ChartFields<'_>, options: BakeOptions) -> Baked {
+        bake(m, fields, 2, &AtlasLayout::grid(2, 256, 2).unwrap(), &options).unwrap()
+    }
+
     fn bake_checked(m: &TriMesh, probs: &[f32], uvs: &[f32], distances: &[f32]) -> Baked {
         let rt = RoundTrip { distances, tolerance: 0.5 };
-        bake(
-            m,
-            &ChartFields { probs, uvs, round_trip: Some(rt) },
-            2,
-            &AtlasLayout::grid(2, 256, 2).unwrap(),
-            &BakeOptions::default(),
-        )
-        .unwrap()
+        bake_two(m, &ChartFields { probs, uvs, round_trip: Some(rt) }, BakeOptions::default())
     }
 
     #[test]
     fn overlapping_faces_failing_the_round_trip_move_to_a_chart_that_passes_it() {
         let (m, probs, uvs, d) = folded_with_round_trip();
-        let plain = bake(
-            &m,
-            &plain(&probs, &uvs),
-            2,
-            &AtlasLayout::grid(2, 256, 2).unwrap(),
-            &BakeOptions::default(),
-        )
-        .unwrap();
+        let plain = bake_two(&m, &plain(&probs, &uvs), BakeOptions::default());
         assert_eq!(plain.report.flipped_faces.len(), 16);
         let b = bake_checked(&m, &probs, &uvs, &d);
         for f in 0..m.triangles.len() {
@@ -507,14 +489,7 @@ mod tests {
     #[test]
     fn faces_that_do_not_overlap_would_flip_or_fail_everywhere_stay() {
         let (m, probs, uvs, d) = folded_with_round_trip();
-        let plain = bake(
-            &m,
-            &plain(&probs, &uvs),
-            2,
-            &AtlasLayout::grid(2, 256, 2).unwrap(),
-            &BakeOptions::default(),
-        )
-        .unwrap();
+        let plain = bake_two(&m, &plain(&probs, &uvs), BakeOptions::default());
         // Chart 0 failing also where nothing overlaps (x > −0.5): those faces stay.
         let d_wide: Vec<f32> = d
             .chunks(2)

@@ -85,6 +85,12 @@ impl AtlasLayout {
         let p = &self.charts[chart];
         [p.offset[0] + p.scale * uv[0], p.offset[1] + p.scale * uv[1]]
     }
+
+    /// Chart `chart`'s square in the atlas as `[lo, hi]`: the images of its `[0,1]²` corners under
+    /// [`AtlasLayout::map`], so a mapped UV inside the chart square is inside these bounds exactly.
+    pub fn chart_bounds(&self, chart: usize) -> [[f32; 2]; 2] {
+        [self.map(chart, [0.0, 0.0]), self.map(chart, [1.0, 1.0])]
+    }
 }
 
 #[cfg(test)]

@@ -43,8 +43,7 @@ use nuvo_geometry::UvLayer;
 use serde::Serialize;
 
 use crate::error::AtlasError;
-use crate::uvstats::DEGENERATE_UV_AREA;
-use crate::vecmath::signed_area2_2d;
+use crate::uvstats::{Orientation, chart_area2_totals, face_uv_area2, orientation, signed_uv_area2};
 
 /// Largest fan (faces around one UV vertex) the repair considers; a vertex with more is not moved.
 pub const MAX_FAN: usize = 24;
@@ -154,10 +153,7 @@ struct FanCount {
 
 impl<'a> State<'a> {
     fn new(layer: &'a mut UvLayer, face_chart: &'a [u32], tiles: &'a [[[f32; 2]; 2]]) -> Self {
-        let mut total = vec![0.0f64; tiles.len()];
-        for (f, &c) in face_chart.iter().enumerate() {
-            total[c as usize] += face_area2(layer, f);
-        }
+        let total = chart_area2_totals(&signed_uv_area2(layer), face_chart, tiles.len());
         let sign = total.iter().map(|&t| if t >= 0.0 { 1.0 } else { -1.0 }).collect();
         let coords = layer.coords.len();
         let mut fans: Vec<Vec<u32>> = vec![Vec::new(); coords];
@@ -190,10 +186,13 @@ impl<'a> State<'a> {
         &self.faces_of[self.start[i as usize]..self.start[i as usize + 1]]
     }
 
-    /// Flipped as `uvstats` counts it: the wrong sign and not degenerate.
+    /// How face `f` sits in its chart, by the rule `uvstats` counts with.
+    fn orientation(&self, f: usize) -> Orientation {
+        orientation(face_uv_area2(self.layer, f), self.sign_of(f) > 0.0)
+    }
+
     fn is_flipped(&self, f: usize) -> bool {
-        let a = face_area2(self.layer, f);
-        a * self.sign_of(f) < 0.0 && a.abs() * 0.5 > DEGENERATE_UV_AREA
+        self.orientation(f) == Orientation::Flipped
     }
 
     /// Flipped faces, in id order.
@@ -203,8 +202,7 @@ impl<'a> State<'a> {
 
     /// Not right (module docs): flipped or degenerate.
     fn is_wrong_way(&self, f: usize) -> bool {
-        let a = face_area2(self.layer, f) * self.sign_of(f);
-        a * 0.5 <= DEGENERATE_UV_AREA
+        self.orientation(f) != Orientation::Right
     }
 
     /// Counts the fan of `i` as the layer stands.
@@ -212,9 +210,10 @@ impl<'a> State<'a> {
         let mut count = FanCount { flipped: 0, wrong: 0, area: Vec::new() };
         for &g in self.fan(i) {
             let g = g as usize;
-            count.flipped += self.is_flipped(g) as usize;
-            count.wrong += self.is_wrong_way(g) as usize;
-            let (c, a) = (self.chart(g), face_area2(self.layer, g));
+            let (c, a) = (self.chart(g), face_uv_area2(self.layer, g));
+            let o = orientation(a, self.sign[c] > 0.0);
+            count.flipped += (o == Orientation::Flipped) as usize;
+            count.wrong += (o != Orientation::Right) as usize;
             match count.area.iter_mut().find(|(k, _)| *k == c) {
                 Some(entry) => entry.1 += a,
                 None => count.area.push((c, a)),
@@ -454,12 +453,6 @@ fn solve3(rows: [([f64; 3], f64); 3]) -> Option<[f64; 3]> {
         *zc = det(m) / d;
     }
     Some(z)
-}
-
-/// Twice the signed area of face `f` of `layer`.
-fn face_area2(layer: &UvLayer, f: usize) -> f64 {
-    let [a, b, c] = layer.triangles[f].map(|i| layer.coords[i as usize]);
-    signed_area2_2d(a, b, c)
 }
 
 #[cfg(test)]

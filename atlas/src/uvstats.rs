@@ -115,7 +115,7 @@ pub fn analyse_uv(
         None => charts_along(&edges, mesh, uv),
     };
     let area2 = signed_uv_area2(uv);
-    let degenerate_uv: Vec<u32> = ids(area2.iter().map(|a| a.abs() * 0.5 <= DEGENERATE_UV_AREA));
+    let degenerate_uv: Vec<u32> = ids(area2.iter().map(|&a| is_degenerate_uv(a)));
     let flipped = flipped_faces(&area2, &face_chart, charts);
     let creased = creases_along(&edges, mesh);
     let flipped_on_creases = flipped.iter().filter(|&&f| creased[f as usize]).count();
@@ -238,13 +238,13 @@ impl EdgeUses {
 
 /// Twice the signed UV area of every face.
 pub(crate) fn signed_uv_area2(uv: &UvLayer) -> Vec<f64> {
-    uv.triangles
-        .par_iter()
-        .map(|t| {
-            let [a, b, c] = t.map(|i| uv.coords[i as usize]);
-            signed_area2_2d(a, b, c)
-        })
-        .collect()
+    (0..uv.triangles.len()).into_par_iter().map(|f| face_uv_area2(uv, f)).collect()
+}
+
+/// Twice the signed UV area of face `f` (counter-clockwise positive).
+pub(crate) fn face_uv_area2(uv: &UvLayer, f: usize) -> f64 {
+    let [a, b, c] = uv.triangles[f].map(|i| uv.coords[i as usize]);
+    signed_area2_2d(a, b, c)
 }
 
 /// Whether each face is degenerate in 3-D ([`DEGENERATE_AREA_REL`]).
@@ -266,15 +266,49 @@ pub(crate) fn degenerate_3d_faces(mesh: &TriMesh) -> Vec<bool> {
 
 /// Faces whose orientation disagrees with their chart's area-weighted majority (module docs).
 fn flipped_faces(area2: &[f64], face_chart: &[u32], charts: usize) -> Vec<u32> {
-    let mut balance = vec![0.0f64; charts];
+    let balance = chart_area2_totals(area2, face_chart, charts);
+    ids(area2
+        .iter()
+        .zip(face_chart)
+        .map(|(&a, &c)| orientation(a, balance[c as usize] >= 0.0) == Orientation::Flipped))
+}
+
+/// Each chart's total of `area2` (twice the signed UV area per face), summed in face order: its
+/// sign is the chart's majority orientation (module docs; `≥ 0` counter-clockwise).
+pub(crate) fn chart_area2_totals(area2: &[f64], face_chart: &[u32], charts: usize) -> Vec<f64> {
+    let mut total = vec![0.0f64; charts];
     for (&a, &c) in area2.iter().zip(face_chart) {
-        balance[c as usize] += a;
+        total[c as usize] += a;
     }
-    ids(area2.iter().zip(face_chart).map(|(&a, &c)| {
-        let degenerate = a.abs() * 0.5 <= DEGENERATE_UV_AREA;
-        let majority_ccw = balance[c as usize] >= 0.0;
-        !degenerate && ((a > 0.0) != majority_ccw)
-    }))
+    total
+}
+
+/// How a face sits in its chart (module docs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Orientation {
+    /// The majority's way round, with measurable area.
+    Right,
+    /// Against the majority, with measurable area.
+    Flipped,
+    /// Of (near) zero UV area: neither.
+    Degenerate,
+}
+
+/// The orientation of a face with twice-signed-area `area2` in a chart whose majority is
+/// counter-clockwise when `majority_ccw`.
+pub(crate) fn orientation(area2: f64, majority_ccw: bool) -> Orientation {
+    if is_degenerate_uv(area2) {
+        Orientation::Degenerate
+    } else if (area2 > 0.0) == majority_ccw {
+        Orientation::Right
+    } else {
+        Orientation::Flipped
+    }
+}
+
+/// Whether twice-signed-area `area2` is a degenerate UV face (|area| ≤ [`DEGENERATE_UV_AREA`]).
+fn is_degenerate_uv(area2: f64) -> bool {
+    area2.abs() * 0.5 <= DEGENERATE_UV_AREA
 }
 
 /// The UV triangle of face `f` in raster pixels of an `r × r` image of `[0,1]²` (v up, row 0 at
