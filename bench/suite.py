@@ -247,6 +247,15 @@ def write_json(path, obj):
     os.replace(tmp, path)
 
 
+def load_average():
+    """The 1-minute load average (None where the OS has none): timings taken at a load well above
+    zero on an otherwise idle benchmark machine were shared with something else."""
+    try:
+        return round(os.getloadavg()[0], 2)
+    except (AttributeError, OSError):
+        return None
+
+
 def now():
     return datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
 
@@ -264,7 +273,7 @@ def run_nuvo(item, args, out):
     os.makedirs(d)
     cmd = [args.nuvo, "unwrap", item.path, "-o", d] + shlex.split(args.nuvo_args or "")
     rec = {"tool": "nuvo", "item": item.name, "group": item.group, "input": item.path,
-           "command": shlex.join(cmd), "started": now()}
+           "command": shlex.join(cmd), "started": now(), "load_before": load_average()}
     rc, wall, reason = run_logged(cmd, os.path.join(d, "unwrap.log"), args.timeout)
     rec.update(returncode=rc, wall_seconds=wall, seconds=wall)
     if reason is None:
@@ -288,7 +297,7 @@ def run_xatlas(item, args, out):
     cmd = [sys.executable, XATLAS_SCRIPT, item.xatlas_mesh, "-o", os.path.join(out, "xatlas"),
            "--name", item.xatlas_name]
     rec = {"tool": "xatlas", "item": item.xatlas_name, "input": item.xatlas_mesh,
-           "command": shlex.join(cmd), "started": now()}
+           "command": shlex.join(cmd), "started": now(), "load_before": load_average()}
     rc, wall, reason = run_logged(cmd, os.path.join(d, "unwrap.log"), args.timeout)
     rec.update(returncode=rc, wall_seconds=wall)
     xj = read_json(os.path.join(d, "xatlas.json"))
@@ -361,7 +370,7 @@ COLUMNS = [  # (key, md header, md format)
 CSV_EXTRA = ["input", "note", "reason", "proxy", "charts_source", "uv_charts", "charts_reported_by_xatlas",
              "utilisation", "xatlas_seconds_with_io", "process_wall_seconds", "eval_seconds",
              "eval_views", "eval_resolution", "bake_faces", "bake_flipped_faces", "bake_overlapping_faces",
-             "finished"]
+             "load_before", "finished"]
 
 
 def _get(d, *keys):
@@ -416,6 +425,7 @@ def nuvo_row(item, rec, out):
     if rec is None:
         return None
     row["finished"] = rec.get("finished")
+    row["load_before"] = rec.get("load_before")
     row["process_wall_seconds"] = rec.get("wall_seconds")
     if rec.get("status") != "ok":
         row.update(success="no: " + str(rec.get("reason")), reason=rec.get("reason"))
@@ -442,6 +452,7 @@ def xatlas_row(item, rec, out):
     if rec is None:
         return None
     row["finished"] = rec.get("finished")
+    row["load_before"] = rec.get("load_before")
     row["process_wall_seconds"] = rec.get("wall_seconds")
     row["xatlas_seconds_with_io"] = rec.get("seconds_with_io")
     row["eval_seconds"] = rec.get("eval_seconds")
@@ -562,6 +573,9 @@ def tool_versions(args):
     try:
         v["nuvo"] = subprocess.run([args.nuvo, "--version"], capture_output=True, text=True,
                                    timeout=30).stdout.strip() or "?"
+        st = os.stat(args.nuvo)
+        built = datetime.datetime.fromtimestamp(st.st_mtime, datetime.timezone.utc).isoformat(timespec="seconds")
+        v["nuvo"] += f" ({os.path.relpath(args.nuvo, REPO) if args.nuvo.startswith(REPO) else args.nuvo}, built {built})"
     except (OSError, subprocess.SubprocessError):
         v["nuvo"] = "not found"
     try:
@@ -595,6 +609,8 @@ def write_report(out, rows, meta):
         f"- per-item timeout: {meta['timeout']:g} s" + (f"; extra nuvo arguments: `{meta['nuvo_args']}`"
                                                       if meta.get("nuvo_args") else ""),
     ]
+    lines.append(f"- 1-minute load average: {meta['load_start']} at the start, {load_average()} now "
+                 "(each run's, before it started, is `load_before` in `suite.csv`)")
     if meta.get("resumed"):
         lines.append(f"- resumed: {meta['resumed']} tool runs taken from earlier sittings (their "
                      "`suite_item.json` has the date)")
@@ -726,6 +742,7 @@ def main(argv=None):
         "command": shlex.join([os.path.relpath(sys.executable) if sys.executable.startswith(REPO) else sys.executable]
                               + sys.argv), "cwd": os.getcwd(),
         "timeout": args.timeout, "nuvo_args": args.nuvo_args, "items": items, "resumed": 0,
+        "load_start": load_average(),
     }
     records = {}  # (tool, folder name) -> record
     rows_of = {}  # (item name, tool) -> row
