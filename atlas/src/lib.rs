@@ -25,6 +25,7 @@ pub mod camera;
 pub mod error;
 pub mod export;
 mod font;
+pub mod gltf_scene;
 pub mod load;
 pub mod metrics;
 pub mod pack;

@@ -47,6 +47,91 @@ fn unreadable_buffers(document: &gltf::Document, base: &Path) -> String {
 ///   triangle primitive has it; otherwise the mesh has no UVs.
 /// - Images are never decoded.
 pub fn load_gltf(path: &Path) -> Result<TriMesh, GeometryError> {
+    load_gltf_scene(path).map(|scene| scene.mesh)
+}
+
+/// What [`load_gltf`] read, with the parsed file and where each face of the merged mesh came from,
+/// for writers that put data back into the user's own scene.
+pub struct GltfScene {
+    /// The merged mesh, exactly as [`load_gltf`] returns it.
+    pub mesh: TriMesh,
+    /// The triangle primitives that make up `mesh`, in merge order: their face and vertex ranges
+    /// tile `mesh.triangles` and `mesh.positions` from the start without gaps.
+    pub primitives: Vec<GltfPrimitiveFaces>,
+    /// The validated document.
+    pub document: gltf::Document,
+    /// The data of every buffer of `document`, by buffer index.
+    pub buffers: Vec<gltf::buffer::Data>,
+}
+
+/// Which primitive of which mesh instance a contiguous range of the merged mesh came from.
+///
+/// Merged vertex `vertices.start + i` is vertex `i` of the primitive (its `POSITION` element `i`,
+/// transformed): every element of the primitive's attributes is kept, used or not. Merged face
+/// `faces.start + j` is triangle `j` of the primitive as the glTF spec assembles it (lists: indices
+/// `3j..3j+3`, trailing indices dropped; strips: `[j, j+1, j+2]`, with the first two swapped for odd
+/// `j`; fans: `[0, j+1, j+2]`), with its last two corners swapped when `mirrored`;
+/// [`GltfPrimitiveFaces::local_triangle`] undoes the offset and the swap.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GltfPrimitiveFaces {
+    /// Index of the mesh instance in [`gltf_mesh_instances`]' order.
+    pub instance: usize,
+    /// The node that instances the mesh (`None` for files without nodes).
+    pub node: Option<usize>,
+    /// The mesh index in the document.
+    pub mesh: usize,
+    /// The primitive index within the mesh.
+    pub primitive: usize,
+    /// The primitive's mode (`Triangles`, `TriangleStrip` or `TriangleFan`).
+    pub mode: Mode,
+    /// The instance's world transform mirrors (negative determinant), so corners 1 and 2 of each
+    /// face were swapped.
+    pub mirrored: bool,
+    /// The faces of the merged mesh this primitive produced.
+    pub faces: std::ops::Range<usize>,
+    /// The vertices of the merged mesh this primitive produced (its whole `POSITION` accessor).
+    pub vertices: std::ops::Range<usize>,
+}
+
+impl GltfPrimitiveFaces {
+    /// Merged face `f` (in `self.faces`) as primitive-local vertex indices in the winding the file
+    /// itself assembles, i.e. with the mirror swap undone. Corner `k` of the result is corner
+    /// [`GltfPrimitiveFaces::merged_corner`]`(k)` of the merged face.
+    pub fn local_triangle(&self, mesh: &TriMesh, f: usize) -> [u32; 3] {
+        let base = self.vertices.start as u32;
+        let t = mesh.triangles[f];
+        [0, 1, 2].map(|k| t[self.merged_corner(k)] - base)
+    }
+
+    /// Which corner of the merged face holds corner `k` of the file's triangle (`k` itself, or the
+    /// last two exchanged when `mirrored`).
+    pub fn merged_corner(&self, k: usize) -> usize {
+        if self.mirrored && k > 0 { 3 - k } else { k }
+    }
+}
+
+/// One instance of a mesh in the scene, in the order [`load_gltf`] merges them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GltfMeshInstance {
+    /// The node that instances the mesh (`None` for files without nodes, where every mesh is
+    /// taken once, untransformed).
+    pub node: Option<usize>,
+    /// The mesh index in the document.
+    pub mesh: usize,
+    /// The world transform (column-major, `matrix[column][row]`).
+    pub matrix: [[f32; 4]; 4],
+}
+
+impl GltfMeshInstance {
+    /// The transform mirrors (negative determinant), so [`load_gltf`] swaps each face's winding.
+    pub fn mirrored(&self) -> bool {
+        det3(&self.matrix) < 0.0
+    }
+}
+
+/// Parses and validates a `.gltf` or `.glb` file the way [`load_gltf`] does, without loading its
+/// buffers or reading any geometry. Returns the document and the GLB binary chunk, if any.
+pub fn read_gltf_document(path: &Path) -> Result<(gltf::Document, Option<Vec<u8>>), GeometryError> {
     let bad = |m: String| GeometryError::malformed(path, m);
     let bytes = std::fs::read(path).map_err(|e| GeometryError::Io { path: path.to_path_buf(), source: e })?;
     let not_gltf = |e: gltf::Error| bad(format!("not a valid glTF/GLB file: {e}"));
@@ -54,17 +139,48 @@ pub fn load_gltf(path: &Path) -> Result<TriMesh, GeometryError> {
     let unchecked = gltf::Gltf::from_slice_without_validation(&bytes).map_err(not_gltf)?;
     check_position_accessors(unchecked.document.as_json()).map_err(bad)?;
     let document = gltf::Document::from_json(unchecked.document.into_json()).map_err(not_gltf)?;
+    Ok((document, unchecked.blob))
+}
+
+/// Every mesh instance of `document`'s scene, in [`load_gltf`]'s order (its docs say which
+/// scene and nodes). Errors (a cycle in the node hierarchy) are sentences without the file name.
+pub fn gltf_mesh_instances(document: &gltf::Document) -> Result<Vec<GltfMeshInstance>, String> {
+    Ok(mesh_instances(document)?
+        .into_iter()
+        .map(|(node, mesh, matrix)| GltfMeshInstance { node, mesh: mesh.index(), matrix })
+        .collect())
+}
+
+/// [`load_gltf`] with the parsed file and the origin of every face: see [`GltfScene`]. Fails
+/// exactly where [`load_gltf`] fails, with the same errors.
+pub fn load_gltf_scene(path: &Path) -> Result<GltfScene, GeometryError> {
+    let bad = |m: String| GeometryError::malformed(path, m);
+    let (document, blob) = read_gltf_document(path)?;
     let base = path.parent().unwrap_or(Path::new("."));
-    let buffers = gltf::import_buffers(&document, Some(base), unchecked.blob).map_err(|e| {
+    let buffers = gltf::import_buffers(&document, Some(base), blob).map_err(|e| {
         bad(format!("cannot load the glTF buffers: {e}{}", unreadable_buffers(&document, base)))
     })?;
     let mut parts = Vec::new();
-    for (mesh, matrix) in mesh_instances(&document).map_err(bad)? {
+    let mut primitives = Vec::new();
+    let (mut faces, mut vertices) = (0, 0);
+    for (instance, (node, mesh, matrix)) in mesh_instances(&document).map_err(bad)?.into_iter().enumerate() {
         for (p, prim) in mesh.primitives().enumerate() {
             let what = format!("mesh {} primitive {p}", mesh.index());
             if let Some(part) =
                 read_primitive(&prim, &buffers, &matrix).map_err(|m| bad(format!("{what}: {m}")))?
             {
+                let (nf, nv) = (part.triangles.len(), part.positions.len());
+                primitives.push(GltfPrimitiveFaces {
+                    instance,
+                    node,
+                    mesh: mesh.index(),
+                    primitive: p,
+                    mode: prim.mode(),
+                    mirrored: det3(&matrix) < 0.0,
+                    faces: faces..faces + nf,
+                    vertices: vertices..vertices + nv,
+                });
+                (faces, vertices) = (faces + nf, vertices + nv);
                 parts.push(part);
             }
         }
@@ -74,7 +190,7 @@ pub fn load_gltf(path: &Path) -> Result<TriMesh, GeometryError> {
         return Err(GeometryError::invalid(path, "the file has no triangle primitives"));
     }
     mesh.validate().map_err(|m| GeometryError::invalid(path, m))?;
-    Ok(mesh)
+    Ok(GltfScene { mesh, primitives, document, buffers })
 }
 
 /// gltf-json's validator looks up each primitive's POSITION accessor without a bounds check (and
@@ -97,8 +213,11 @@ fn check_position_accessors(root: &gltf::json::Root) -> Result<(), String> {
     Ok(())
 }
 
-/// Every (mesh, world matrix) pair to read, following the scene graph.
-fn mesh_instances(doc: &gltf::Document) -> Result<Vec<(gltf::Mesh<'_>, Mat4)>, String> {
+/// A mesh instance: (node, mesh, world matrix).
+type Instance<'a> = (Option<usize>, gltf::Mesh<'a>, Mat4);
+
+/// Every mesh instance to read, following the scene graph.
+fn mesh_instances(doc: &gltf::Document) -> Result<Vec<Instance<'_>>, String> {
     let roots: Vec<gltf::Node> = match doc.default_scene().or_else(|| doc.scenes().next()) {
         Some(scene) => scene.nodes().collect(),
         None if doc.nodes().len() > 0 => {
@@ -112,7 +231,7 @@ fn mesh_instances(doc: &gltf::Document) -> Result<Vec<(gltf::Mesh<'_>, Mat4)>, S
             }
             doc.nodes().filter(|n| !is_child.get(n.index()).copied().unwrap_or(true)).collect()
         }
-        None => return Ok(doc.meshes().map(|m| (m, IDENTITY)).collect()),
+        None => return Ok(doc.meshes().map(|m| (None, m, IDENTITY)).collect()),
     };
     let mut out = Vec::new();
     // Depth-first walk with an explicit stack; a node graph deeper than the node count has a cycle.
@@ -126,7 +245,7 @@ fn mesh_instances(doc: &gltf::Document) -> Result<Vec<(gltf::Mesh<'_>, Mat4)>, S
         }
         let world = mat_mul(&parent, &node.transform().matrix());
         if let Some(mesh) = node.mesh() {
-            out.push((mesh, world));
+            out.push((Some(node.index()), mesh, world));
         }
         let children: Vec<gltf::Node> = node.children().collect();
         stack.extend(children.into_iter().rev().map(|c| (c, world, depth + 1)));
