@@ -183,6 +183,14 @@ pub fn glb_bytes(mesh: &TriMesh, frame: &Similarity, opts: &GlbOptions) -> Resul
     glb.to_vec().map_err(|e| AtlasError::Encode { path: "mesh.glb".into(), message: e.to_string() })
 }
 
+/// For each vertex of the GLB that [`glb_bytes`] writes for `mesh`, the index of the mesh vertex it
+/// copies: a vertex on a UV seam appears once per UV it has, so this is how a user carries per-vertex
+/// data of their own mesh over to the GLB (`nuvo unwrap` writes it as `vertex_map.json`).
+pub fn glb_vertex_map(mesh: &TriMesh) -> Result<Vec<u32>, AtlasError> {
+    let uv = uv_of(mesh, Path::new("mesh"))?;
+    Ok(split_seams(mesh, uv).vertices.iter().map(|&(p, _)| p).collect())
+}
+
 /// The mesh re-indexed for per-vertex attributes: one vertex per distinct (position, UV) pair.
 struct SplitMesh {
     /// (original position index, UV) of each output vertex, in first-use order.
@@ -424,6 +432,23 @@ mod tests {
         assert_eq!(mime_type, "image/png");
         assert_eq!(&blob[view.offset()..view.offset() + view.length()], &png);
         assert!(gltf.materials().next().unwrap().double_sided());
+    }
+
+    #[test]
+    fn the_vertex_map_names_the_mesh_vertex_of_every_glb_vertex() {
+        let (m, frame) = seamed();
+        let map = glb_vertex_map(&m).unwrap();
+        let glb = glb_bytes(&m, &frame, &GlbOptions::default()).unwrap();
+        let (doc, buffers, _) = gltf::import_slice(&glb).unwrap();
+        let prim = doc.meshes().next().unwrap().primitives().next().unwrap();
+        let reader = prim.reader(|b| Some(&buffers[b.index()]));
+        let positions: Vec<[f32; 3]> = reader.read_positions().unwrap().collect();
+        assert_eq!(map.len(), positions.len());
+        assert!(map.len() > m.positions.len(), "the fixture has a seam");
+        for (k, &v) in map.iter().enumerate() {
+            let want = frame.invert(m.positions[v as usize]);
+            assert_eq!(positions[k], want, "GLB vertex {k} is mesh vertex {v}");
+        }
     }
 
     #[test]

@@ -36,6 +36,7 @@ pub mod obj;
 pub mod options;
 pub mod ply;
 pub mod point_cloud;
+pub mod profile;
 pub mod raycast;
 pub mod registry;
 pub mod sampling;

@@ -6,6 +6,7 @@
 //! path = "unruly_vase.obj"     # .obj, .gltf or .glb
 //! sampling = "visible"         # or "uniform" (default)
 //! normals = "face"             # or "vertex"
+//! flip_normals = false         # true for a mesh wound inside out
 //! [geometry.cameras]           # visible mode only; see CameraOptions
 //! radius = 3.0
 //! ```
@@ -50,6 +51,11 @@ pub struct MeshOptions {
     /// `"face"` (default): the triangle's normal; `"vertex"`: interpolated vertex normals.
     #[serde(default)]
     pub normals: NormalMode,
+    /// Point every normal the other way (default false): for a mesh wound inside out, whose
+    /// triangles are clockwise seen from outside. `nuvo unwrap` sets it when the mesh profile finds
+    /// that rays leave the surface through the back of its faces (`nuvo_geometry::profile`).
+    #[serde(default)]
+    pub flip_normals: bool,
     /// Cameras for `sampling = "visible"` (ignored otherwise). Defaults: random cameras at radius 3.
     #[serde(default)]
     pub cameras: Option<CameraOptions>,
@@ -67,6 +73,8 @@ enum Sampler {
 pub struct MeshSource {
     path: PathBuf,
     mesh: TriMesh,
+    /// The vertex positions exactly as loaded, so writers can give them back bit for bit.
+    input_positions: Vec<[f32; 3]>,
     to_canonical: Similarity,
     bounds: Aabb,
     normals: SurfaceNormals,
@@ -98,11 +106,13 @@ impl MeshSource {
         let raw_bounds =
             mesh.bounds().ok_or_else(|| GeometryError::invalid(&path, "the mesh has no vertices"))?;
         let to_canonical = Similarity::normalizing(&raw_bounds);
+        let input_positions = mesh.positions.clone();
         mesh.transform(&to_canonical);
         let bounds = mesh.bounds().unwrap_or(Aabb { min: [-1.0; 3], max: [1.0; 3] });
         // Both modes need positive area: the uniform sampler to draw from, the ray caster to hit.
         let areas = AreaSampler::new(&mesh).map_err(|m| GeometryError::invalid(&path, m))?;
         let normals = SurfaceNormals::new(&mesh, opts.normals);
+        let normals = if opts.flip_normals { normals.flipped() } else { normals };
         let sampler = match opts.sampling {
             SamplingMode::Uniform => Sampler::Uniform(areas),
             SamplingMode::Visible => {
@@ -112,7 +122,7 @@ impl MeshSource {
                 Sampler::Visible(Box::new(vs))
             }
         };
-        Ok(MeshSource { path, mesh, to_canonical, bounds, normals, sampler })
+        Ok(MeshSource { path, mesh, input_positions, to_canonical, bounds, normals, sampler })
     }
 
     /// The visible-mode sampler, when this source uses it.
@@ -146,6 +156,10 @@ impl GeometrySource for MeshSource {
 
     fn mesh(&self) -> Option<&TriMesh> {
         Some(&self.mesh)
+    }
+
+    fn input_positions(&self) -> Option<&[[f32; 3]]> {
+        Some(&self.input_positions)
     }
 
     fn describe(&self) -> String {

@@ -57,8 +57,59 @@ pub fn load_obj(path: &Path) -> Result<TriMesh, GeometryError> {
     if mesh.triangles.is_empty() {
         return Err(GeometryError::invalid(path, "the mesh has no faces"));
     }
+    if let Some((positions, triangles)) = in_file_order(path, &mesh) {
+        mesh.positions = positions;
+        mesh.triangles = triangles;
+    }
     mesh.validate().map_err(|m| GeometryError::invalid(path, m))?;
     Ok(mesh)
+}
+
+/// The mesh's vertices in the file's own order (every `v` line, referenced or not) and its faces
+/// indexing them, or `None` when the file's text does not match what `tobj` read.
+///
+/// `tobj` numbers the vertices of each object in the order the faces first use them, so a user's
+/// vertex `i` would not be ours; a tool that hands UVs back to the user's mesh must keep the file's
+/// numbering (`nuvo unwrap` writes `atlas.obj` in it). The file has already been read and checked by
+/// `tobj`; this pass re-reads only the `v` and `f` lines, fan-triangulates polygons as `tobj` does,
+/// and is used only if every corner lands on the same position as `tobj`'s, so it can never
+/// change the geometry, only its numbering.
+fn in_file_order(path: &Path, mesh: &TriMesh) -> Option<(Vec<[f32; 3]>, Vec<[u32; 3]>)> {
+    let text = std::fs::read_to_string(path).ok()?;
+    let mut positions: Vec<[f32; 3]> = Vec::new();
+    let mut triangles: Vec<[u32; 3]> = Vec::with_capacity(mesh.triangles.len());
+    for line in text.lines() {
+        let mut words = line.split_whitespace();
+        match words.next() {
+            Some("v") => {
+                let mut c = [0.0f32; 3];
+                for x in &mut c {
+                    *x = words.next()?.parse().ok()?;
+                }
+                positions.push(c);
+            }
+            Some("f") => {
+                let corners: Vec<u32> = words
+                    .map(|w| {
+                        let i: i64 = w.split('/').next()?.parse().ok()?;
+                        let n = positions.len() as i64;
+                        let k = if i < 0 { n + i } else { i - 1 };
+                        (0..n).contains(&k).then_some(k as u32)
+                    })
+                    .collect::<Option<_>>()?;
+                for k in 1..corners.len().saturating_sub(1) {
+                    triangles.push([corners[0], corners[k], corners[k + 1]]);
+                }
+            }
+            _ => {}
+        }
+    }
+    let same = triangles.len() == mesh.triangles.len()
+        && triangles
+            .iter()
+            .zip(&mesh.triangles)
+            .all(|(a, b)| (0..3).all(|k| positions[a[k] as usize] == mesh.positions[b[k] as usize]));
+    same.then_some((positions, triangles))
 }
 
 /// Counts `f` lines whose corners all carry a `vt` index, and those with some corner without one.
@@ -103,6 +154,17 @@ mod tests {
         let uv = m.uv.as_ref().unwrap();
         assert_eq!(uv.triangles.len(), 2);
         assert_eq!(uv.coords.len(), 4);
+    }
+
+    #[test]
+    fn vertices_keep_the_file_order_even_unreferenced_ones() {
+        // The faces use vertex 3 first and never use vertex 5; negative indices count back.
+        let p = write("order.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 9 9 9\nf 3 4 1\nf 3 -4 -5\n");
+        let m = load_obj(&p).unwrap();
+        assert_eq!(m.positions.len(), 5);
+        assert_eq!(m.positions[4], [9.0, 9.0, 9.0]);
+        assert_eq!(m.positions[2], [1.0, 1.0, 0.0]);
+        assert_eq!(m.triangles, vec![[2, 3, 0], [2, 1, 0]]);
     }
 
     #[test]

@@ -48,6 +48,13 @@ pub trait GeometrySource: Send + Sync {
         None
     }
 
+    /// The vertex positions of [`GeometrySource::mesh`] exactly as the input file stored them, when
+    /// the source read them from a file: writers use them instead of mapping the canonical ones back,
+    /// which would change the last bits of a user's coordinates.
+    fn input_positions(&self) -> Option<&[[f32; 3]]> {
+        None
+    }
+
     /// One line describing what was loaded, for logs ("mesh assets/bunny.obj: 69451 faces ...").
     fn describe(&self) -> String;
 }

@@ -6,6 +6,7 @@ mod demo;
 mod eval;
 mod losses;
 mod train;
+mod unwrap;
 
 use std::process::ExitCode;
 
@@ -21,6 +22,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Unwrap any mesh, point cloud or density grid with settings chosen for it (the way to start).
+    Unwrap(unwrap::UnwrapArgs),
     /// Train an atlas from an experiment config, then bake, export, draw and measure it.
     Train(train::TrainArgs),
     /// Train the base config and its loss-ablation variants, then write the paper's ablation table.
@@ -39,6 +42,7 @@ enum Command {
 
 fn main() -> ExitCode {
     let result = match Cli::parse().command {
+        Command::Unwrap(args) => unwrap::run_unwrap(&args),
         Command::Train(args) => train::train(&args),
         Command::Ablate(args) => ablate::run(&args),
         Command::Bake(args) => train::bake(&args),

@@ -127,10 +127,19 @@ fn build_trainer(loaded: &LoadedConfig) -> anyhow::Result<Trainer> {
 }
 
 fn bake_into(trainer: &mut Trainer, out: &Path, loaded: &LoadedConfig) -> anyhow::Result<()> {
+    bake_into_report(trainer, out, loaded).map(drop)
+}
+
+/// Bakes, exports, draws and measures into `out`, prints what was written, and returns the report.
+pub(crate) fn bake_into_report(
+    trainer: &mut Trainer,
+    out: &Path,
+    loaded: &LoadedConfig,
+) -> anyhow::Result<OutputReport> {
     let started = Instant::now();
     let report = write_outputs(trainer, out, &loaded.config.output)?;
     print_report(&report, started.elapsed().as_secs_f64());
-    Ok(())
+    Ok(report)
 }
 
 fn print_report(report: &OutputReport, seconds: f64) {

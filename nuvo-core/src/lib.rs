@@ -20,6 +20,7 @@ pub mod outputs;
 pub mod run;
 pub mod seeds;
 pub mod trainer;
+pub mod unwrap;
 pub mod warm_start;
 
 pub use checkpoint::{Checkpoint, CheckpointError};

@@ -9,24 +9,30 @@
 //! | `checker.png` | the checkerboard texture the OBJ's material and the renders use |
 //! | `renders/view_{k}.png` | the mesh wearing the checkerboard from several views |
 //! | `normal_grids.png` | the learned normal grids `N_i`, packed like the atlas |
-//! | `metrics.json` | Boundary, Stretch, Conformal, Editability, UV statistics and the bake report |
+//! | `metrics.json` | Boundary, Stretch, Conformal, Editability, the PartUV metric set, UV statistics and the bake report |
+//! | `vertex_map.json` | for each vertex of `atlas.glb`, the input vertex it copies (seams split vertices) |
 //! | `points_uv.csv` | per-point charts and UVs, when there is no mesh to bake onto |
 //!
 //! Baking follows the paper's "(b)" rows: the networks are evaluated at the mesh vertices, every face
 //! takes one chart and its corners that chart's UVs (see `nuvo_atlas::bake`).
+//!
+//! **The user's own mesh.** `atlas.obj` has the input's vertices (positions bit for bit as the file
+//! stored them, when the source kept them) in the input's order and its faces in the input's order,
+//! with one `vt` per corner; `atlas.glb` splits vertices on seams, and `vertex_map.json` says which
+//! input vertex each of its vertices is.
 
 use std::path::{Path, PathBuf};
 
 use nuvo_atlas::AtlasError;
 use nuvo_atlas::bake::{BakeOptions, BakeReport, ChartFields, RoundTrip, bake};
 use nuvo_atlas::camera::orbit_views;
-use nuvo_atlas::export::{GlbOptions, write_glb, write_obj};
+use nuvo_atlas::export::{GlbOptions, glb_vertex_map, write_glb, write_obj};
 use nuvo_atlas::metrics::{EvalOptions, Metrics, evaluate};
 use nuvo_atlas::pack::AtlasLayout;
 use nuvo_atlas::pictures::{
     ChartGrid, chart_grid_image, checkerboard, pack_images, png_bytes, render_textured, uv_layout, write_png,
 };
-use nuvo_geometry::{GeometryError, TriMesh};
+use nuvo_geometry::{GeometryError, Similarity, TriMesh};
 use nuvo_losses::Networks;
 use serde::Serialize;
 
@@ -43,6 +49,7 @@ pub mod names {
     pub const NORMAL_GRIDS: &str = "normal_grids.png";
     pub const METRICS: &str = "metrics.json";
     pub const POINTS: &str = "points_uv.csv";
+    pub const VERTEX_MAP: &str = "vertex_map.json";
 }
 
 /// Why outputs could not be written.
@@ -82,6 +89,13 @@ pub struct BakeSummary {
     pub faces_per_chart: Vec<usize>,
 }
 
+/// What `vertex_map.json` holds.
+#[derive(Serialize)]
+struct VertexMap {
+    about: &'static str,
+    glb_to_input: Vec<u32>,
+}
+
 /// What `metrics.json` holds.
 #[derive(Clone, Debug, Serialize)]
 pub struct OutputMetrics {
@@ -97,6 +111,8 @@ pub struct OutputMetrics {
 #[derive(Clone, Debug)]
 pub struct OutputReport {
     pub files: Vec<PathBuf>,
+    /// The baked UVs, per corner of the mesh baked onto (`None` without a mesh).
+    pub baked_uv: Option<nuvo_geometry::UvLayer>,
     /// `None` when there was no mesh to bake onto (per-point UVs were written instead).
     pub metrics: Option<OutputMetrics>,
 }
@@ -114,18 +130,22 @@ pub fn write_outputs(
     opts: &OutputConfig,
 ) -> Result<OutputReport, OutputError> {
     std::fs::create_dir_all(dir).map_err(io_err(dir))?;
+    // The mesh to bake onto, in the canonical frame, and its vertices as the input stored them.
     let mesh = match (&opts.bake_mesh, trainer.source().mesh()) {
         (Some(path), _) => {
             let mut m = nuvo_geometry::load_mesh(path)?;
             m.uv = None;
+            let input = m.positions.clone();
             m.transform(&trainer.source().to_canonical());
-            Some(m)
+            Some((m, Some(input)))
         }
-        (None, Some(m)) => Some(TriMesh { uv: None, ..m.clone() }),
+        (None, Some(m)) => {
+            Some((TriMesh { uv: None, ..m.clone() }, trainer.source().input_positions().map(<[_]>::to_vec)))
+        }
         (None, None) => None,
     };
     match mesh {
-        Some(mesh) => bake_and_measure(trainer, &mesh, dir, opts),
+        Some((mesh, input)) => bake_and_measure(trainer, &mesh, input, dir, opts),
         None => write_point_uvs(trainer, dir, opts),
     }
 }
@@ -133,6 +153,7 @@ pub fn write_outputs(
 fn bake_and_measure(
     trainer: &mut Trainer,
     mesh: &TriMesh,
+    input_positions: Option<Vec<[f32; 3]>>,
     dir: &Path,
     opts: &OutputConfig,
 ) -> Result<OutputReport, OutputError> {
@@ -156,17 +177,33 @@ fn bake_and_measure(
     let checker = checkerboard(opts.atlas_resolution.min(2048), 8 * layout.columns)?;
     write_png(&path(names::CHECKER), &checker)?;
     files.push(path(names::CHECKER));
-    write_obj(&path(names::OBJ), &baked.mesh, &frame, Some(Path::new(names::CHECKER)))?;
+    // Writers get the input's own positions when there are any (bit for bit), else map back.
+    let (export, export_frame) = match input_positions {
+        Some(positions) if positions.len() == baked.mesh.positions.len() => {
+            (TriMesh { positions, ..baked.mesh.clone() }, Similarity::IDENTITY)
+        }
+        _ => (baked.mesh.clone(), frame),
+    };
+    write_obj(&path(names::OBJ), &export, &export_frame, Some(Path::new(names::CHECKER)))?;
     files.push(path(names::OBJ));
     files.push(path(names::OBJ).with_extension("mtl"));
     let png = png_bytes(&checker)?;
     write_glb(
         &path(names::GLB),
-        &baked.mesh,
-        &frame,
+        &export,
+        &export_frame,
         &GlbOptions { normals: true, texture_png: Some(&png) },
     )?;
     files.push(path(names::GLB));
+    let map = serde_json::to_string(&VertexMap {
+        about: "for each vertex of atlas.glb, the index (0-based) of the input mesh vertex it copies",
+        glb_to_input: glb_vertex_map(&export)?,
+    })
+    .map_err(|e| io_err(&path(names::VERTEX_MAP))(std::io::Error::other(e)))?;
+    drop(export);
+    nuvo_geometry::fsio::write_bytes_atomic(&path(names::VERTEX_MAP), map.as_bytes())
+        .map_err(io_err(&path(names::VERTEX_MAP)))?;
+    files.push(path(names::VERTEX_MAP));
     write_png(
         &path(names::LAYOUT),
         &uv_layout(&baked.mesh, Some(&baked.face_chart), opts.atlas_resolution.min(2048))?,
@@ -183,11 +220,12 @@ fn bake_and_measure(
         bake: summarize(&baked.report, &baked.face_chart, n),
         steps: trainer.step_index(),
     };
-    let json = serde_json::to_string_pretty(&summary).unwrap_or_default();
+    let json = serde_json::to_string_pretty(&summary)
+        .map_err(|e| io_err(&path(names::METRICS))(std::io::Error::other(e)))?;
     nuvo_geometry::fsio::write_bytes_atomic(&path(names::METRICS), json.as_bytes())
         .map_err(io_err(&path(names::METRICS)))?;
     files.push(path(names::METRICS));
-    Ok(OutputReport { files, metrics: Some(summary) })
+    Ok(OutputReport { files, baked_uv: baked.mesh.uv, metrics: Some(summary) })
 }
 
 fn summarize(r: &BakeReport, face_chart: &[u32], n: usize) -> BakeSummary {
@@ -273,5 +311,5 @@ fn write_point_uvs(
     }
     let path = dir.join(names::POINTS);
     nuvo_geometry::fsio::write_bytes_atomic(&path, csv.as_bytes()).map_err(io_err(&path))?;
-    Ok(OutputReport { files: vec![path], metrics: None })
+    Ok(OutputReport { files: vec![path], baked_uv: None, metrics: None })
 }

@@ -129,26 +129,18 @@ impl Trainer {
         sources: &SourceRegistry,
         losses: &LossRegistry,
     ) -> Result<Self, TrainError> {
+        let source = build_source(loaded, sources)?;
+        Self::with_source(loaded, source, losses)
+    }
+
+    /// [`Trainer::new`] with the geometry source already built (from `loaded`'s `[geometry]` table):
+    /// `nuvo unwrap` measures a source before it trains on it and need not load the input twice.
+    pub fn with_source(
+        loaded: &LoadedConfig,
+        source: Box<dyn GeometrySource>,
+        losses: &LossRegistry,
+    ) -> Result<Self, TrainError> {
         let config = loaded.config.clone();
-        let src = &loaded.source;
-        let ctx = BuildContext { base_dir: src.base_dir() };
-        let source =
-            sources.build(&config.geometry.source, &config.geometry.options, &ctx).map_err(|e| match e {
-                GeometryError::Options { message, .. } => {
-                    TrainError::Config(src.serde_error("geometry", &message))
-                }
-                GeometryError::UnknownSource { .. } => {
-                    TrainError::Config(src.invalid("geometry.source", e.to_string()))
-                }
-                other => {
-                    let key = if config.geometry.options.contains_key("path") {
-                        "geometry.path"
-                    } else {
-                        "geometry"
-                    };
-                    TrainError::Source { config: src.locate(key), source: other }
-                }
-            })?;
         let terms = build_terms(&config, loaded, losses)?;
         let warm_start = fit_warm_start(&config, &*source)?;
         let mut params = ParamStore::new();
@@ -219,6 +211,21 @@ impl Trainer {
     /// Steps the schedule spans.
     pub fn total_steps(&self) -> u64 {
         self.config.training.steps
+    }
+
+    /// Changes the number of steps the run (and its cosine schedule) spans, before the first step:
+    /// `nuvo unwrap` fits the step count to a time budget after timing a few steps and restoring
+    /// the untrained state. An error once training has begun, since the schedule already ran.
+    pub fn set_total_steps(&mut self, steps: u64) -> Result<(), TrainError> {
+        if self.step != 0 || steps == 0 {
+            return Err(TrainError::Resume(format!(
+                "the step count can only change before training (at step {}), to a positive number (got {steps})",
+                self.step
+            )));
+        }
+        self.config.training.steps = steps;
+        self.schedule.total_steps = steps;
+        Ok(())
     }
 
     /// The learning-rate multiplier left by NaN rollbacks (1 normally).
@@ -424,6 +431,32 @@ impl Trainer {
 
 /// Fits the projection prior to a sample of the scene drawn from the run's own seed, so a resumed
 /// run fits the same one.
+/// The geometry source `loaded`'s `[geometry]` table names, built from `sources`, with errors that
+/// locate the config key.
+pub fn build_source(
+    loaded: &LoadedConfig,
+    sources: &SourceRegistry,
+) -> Result<Box<dyn GeometrySource>, TrainError> {
+    let config = &loaded.config;
+    let src = &loaded.source;
+    let ctx = BuildContext { base_dir: src.base_dir() };
+    let built =
+        sources.build(&config.geometry.source, &config.geometry.options, &ctx).map_err(|e| match e {
+            GeometryError::Options { message, .. } => {
+                TrainError::Config(src.serde_error("geometry", &message))
+            }
+            GeometryError::UnknownSource { .. } => {
+                TrainError::Config(src.invalid("geometry.source", e.to_string()))
+            }
+            other => {
+                let key =
+                    if config.geometry.options.contains_key("path") { "geometry.path" } else { "geometry" };
+                TrainError::Source { config: src.locate(key), source: other }
+            }
+        })?;
+    Ok(built)
+}
+
 fn fit_warm_start(
     config: &ExperimentConfig,
     source: &dyn GeometrySource,

@@ -177,6 +177,15 @@ pub struct ProjectionPrior {
     depth_maps: Vec<DepthMap>,
 }
 
+/// What [`ProjectionPrior::coverage`] measured.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Coverage {
+    /// Share of the samples their starting chart supervises.
+    pub supervised: f64,
+    /// Mean `|n · a|` of the samples with their starting chart's axis.
+    pub mean_facing: f64,
+}
+
 /// Rounds of spherical k-means that adapt the starting axes to the normals.
 const KMEANS_ROUNDS: usize = 10;
 
@@ -275,6 +284,22 @@ impl ProjectionPrior {
                 dot(&d, axis) > -AZIMUTHAL_REACH && dot(n, &d) > self.min_alignment
             }
         }
+    }
+
+    /// How well these charts can start a sample (model frame, unit normals) fold-free: the share of
+    /// the samples that the chart they start in ([`ProjectionPrior::label`]) supervises (it faces
+    /// them by more than `min_alignment` and, with depth maps, sees them), and the mean of
+    /// `|n · a|` with that chart's axis over all samples (1: every point seen head-on; an
+    /// orthographic map shrinks areas by this factor). `nuvo unwrap` picks the chart count with it.
+    pub fn coverage(&self, points: &[[f32; 3]], normals: &[[f32; 3]]) -> Coverage {
+        let (mut covered, mut facing) = (0usize, 0.0f64);
+        for (x, n) in points.iter().zip(normals) {
+            let i = self.label(x, n);
+            covered += usize::from(self.supervises(i, x, n));
+            facing += f64::from(dot(n, &self.frames[i].axis).abs());
+        }
+        let count = points.len().max(1) as f64;
+        Coverage { supervised: covered as f64 / count, mean_facing: facing / count }
     }
 
     /// The charts' axes (unit vectors).

@@ -41,6 +41,15 @@ impl SurfaceNormals {
         SurfaceNormals { mode, face, vertex }
     }
 
+    /// The same normals pointing the other way: for a mesh wound inside out (its triangles
+    /// clockwise seen from outside), whose winding normals point into the object.
+    pub fn flipped(mut self) -> Self {
+        for n in self.face.iter_mut().chain(self.vertex.iter_mut()) {
+            *n = n.map(|c| -c);
+        }
+        self
+    }
+
     /// The unit normal at barycentric `(b1, b2)` of face `f` (corner weights `1-b1-b2, b1, b2`). In
     /// vertex mode an interpolated normal that vanishes falls back to the face normal.
     pub fn at(&self, mesh: &TriMesh, f: usize, b1: f32, b2: f32) -> V3 {

@@ -85,7 +85,7 @@ pub fn append(m: &mut TriMesh, other: &TriMesh) {
 }
 
 pub fn options(sampling: SamplingMode, normals: NormalMode) -> MeshOptions {
-    MeshOptions { path: PathBuf::from("synthetic"), sampling, normals, cameras: None }
+    MeshOptions { path: PathBuf::from("synthetic"), sampling, normals, flip_normals: false, cameras: None }
 }
 
 pub fn source(mesh: TriMesh, sampling: SamplingMode, normals: NormalMode) -> MeshSource {

@@ -1,0 +1,230 @@
+//! `nuvo unwrap` end to end: a mesh it has never seen, with no config; the user's vertices and faces
+//! kept; `config.toml` reproducing the run; glTF in, glTF scene out; bad input refused cleanly.
+
+use std::path::{Path, PathBuf};
+
+mod common;
+use common::{nuvo, run};
+
+/// A closed latitude-longitude sphere (squashed into an ellipsoid, so it has a preferred axis),
+/// written as OBJ with 1-based indices and awkward coordinates that do not survive a scale and back.
+fn write_ellipsoid(path: &Path) -> (Vec<String>, Vec<String>) {
+    let (rings, segments) = (12, 16);
+    let mut v = Vec::new();
+    v.push(format!("v 0.1 0.3 {}", 0.7 + 1.0 / 3.0));
+    for r in 1..rings {
+        let theta = std::f64::consts::PI * r as f64 / rings as f64;
+        for s in 0..segments {
+            let phi = std::f64::consts::TAU * s as f64 / segments as f64;
+            let (x, y, z) = (theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos());
+            v.push(format!("v {} {} {}", 0.1 + 0.6 * x as f32, 0.3 + 0.35 * y as f32, 0.7 + z as f32 / 3.0));
+        }
+    }
+    v.push(format!("v 0.1 0.3 {}", 0.7 - 1.0 / 3.0));
+    let ring = |r: usize, s: usize| 2 + (r - 1) * segments + s % segments;
+    let mut f = Vec::new();
+    for s in 0..segments {
+        f.push(format!("f 1 {} {}", ring(1, s), ring(1, s + 1)));
+        for r in 1..rings - 1 {
+            let (a, b, c, d) = (ring(r, s), ring(r + 1, s), ring(r + 1, s + 1), ring(r, s + 1));
+            f.push(format!("f {a} {b} {c}"));
+            f.push(format!("f {a} {c} {d}"));
+        }
+        let last = v.len();
+        f.push(format!("f {last} {} {}", ring(rings - 1, s + 1), ring(rings - 1, s)));
+    }
+    std::fs::write(path, format!("{}\n{}\n", v.join("\n"), f.join("\n"))).unwrap();
+    (v, f)
+}
+
+/// Settings that make a run take seconds; everything else is what `nuvo unwrap` chooses.
+const FAST: &[&str] = &[
+    "--set",
+    "training.steps=12",
+    "--set",
+    "training.batch_3d=256",
+    "--set",
+    "training.batch_uv=256",
+    "--set",
+    "model.depth=2",
+    "--set",
+    "model.width=16",
+    "--set",
+    "model.grid_resolution=8",
+    "--set",
+    "warm_start.samples=2000",
+    "--set",
+    "output.atlas_resolution=256",
+    "--set",
+    "output.eval_views=2",
+    "--set",
+    "output.eval_resolution=64",
+    "--set",
+    "output.renders=1",
+    "--set",
+    "output.render_resolution=64",
+];
+
+fn unwrap(input: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
+    run(nuvo().arg("unwrap").arg(input).arg("-o").arg(out).args(FAST).args(extra))
+}
+
+fn numbers(line: &str) -> Vec<f32> {
+    line.split_whitespace().skip(1).map(|w| w.split('/').next().unwrap().parse().unwrap()).collect()
+}
+
+#[test]
+fn a_new_mesh_unwraps_with_no_config_and_keeps_its_vertices_and_faces() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("ellipsoid.obj");
+    let (v, f) = write_ellipsoid(&input);
+    let out = dir.path().join("run");
+    let o = unwrap(&input, &out, &[]);
+    assert!(o.status.success());
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    for said in ["sampling: uniform", "charts: ", "share of the surface", "reproduces it with `nuvo train"] {
+        assert!(stdout.contains(said), "`{said}` missing from:\n{stdout}");
+    }
+    for file in ["atlas.obj", "atlas.glb", "vertex_map.json", "metrics.json", "config.toml", "unwrap.json"] {
+        assert!(out.join(file).is_file(), "{file} missing");
+    }
+    // The OBJ: the input's vertices bit for bit, in order; its faces in order; a UV per corner.
+    let obj = std::fs::read_to_string(out.join("atlas.obj")).unwrap();
+    let out_v: Vec<&str> = obj.lines().filter(|l| l.starts_with("v ")).collect();
+    let out_f: Vec<&str> = obj.lines().filter(|l| l.starts_with("f ")).collect();
+    assert_eq!(out_v.len(), v.len());
+    for (a, b) in out_v.iter().zip(&v) {
+        assert_eq!(numbers(a), numbers(b), "vertex moved");
+    }
+    assert_eq!(out_f.len(), f.len());
+    for (a, b) in out_f.iter().zip(&f) {
+        assert_eq!(numbers(a), numbers(b), "face changed or reordered");
+        assert!(a.split_whitespace().skip(1).all(|c| c.contains('/')), "no UV on {a}");
+    }
+    // The vertex map names, for every GLB vertex, the input vertex at the same place.
+    let map: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("vertex_map.json")).unwrap()).unwrap();
+    let map: Vec<usize> =
+        map["glb_to_input"].as_array().unwrap().iter().map(|x| x.as_u64().unwrap() as usize).collect();
+    let glb = nuvo_geometry::load_mesh(&out.join("atlas.glb")).unwrap();
+    assert!(map.len() >= v.len());
+    for t in &glb.triangles {
+        for &k in t {
+            let want = numbers(&v[map[k as usize]]);
+            let got = glb.positions[k as usize];
+            for c in 0..3 {
+                assert!(
+                    (got[c] - want[c]).abs() < 1e-6,
+                    "GLB vertex {k} is not input vertex {}",
+                    map[k as usize]
+                );
+            }
+        }
+    }
+    // unwrap.json has the decisions and the numbers behind them.
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("unwrap.json")).unwrap()).unwrap();
+    let decided: Vec<&str> =
+        report["decisions"].as_array().unwrap().iter().map(|d| d["what"].as_str().unwrap()).collect();
+    assert_eq!(decided, ["source", "sampling", "charts", "steps"]);
+    assert_eq!(report["chart_trials"].as_array().unwrap().len(), 7);
+    assert_eq!(report["profile"]["components"], 1);
+}
+
+#[test]
+fn config_toml_reproduces_the_run_exactly() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("ellipsoid.obj");
+    write_ellipsoid(&input);
+    let first = dir.path().join("first");
+    assert!(unwrap(&input, &first, &["--charts", "3"]).status.success());
+    let second = dir.path().join("second");
+    let o = run(nuvo().arg("train").arg(first.join("config.toml")).arg("--out").arg(&second));
+    assert!(o.status.success());
+    for file in ["checkpoint.safetensors", "atlas.obj", "metrics.json"] {
+        let (a, b) = (std::fs::read(first.join(file)).unwrap(), std::fs::read(second.join(file)).unwrap());
+        assert!(a == b, "{file} differs between `nuvo unwrap` and `nuvo train` of its config.toml");
+    }
+}
+
+#[test]
+fn a_gltf_scene_comes_back_with_its_nodes_and_materials_and_new_uvs() {
+    let dir = tempfile::tempdir().unwrap();
+    let obj = dir.path().join("ellipsoid.obj");
+    write_ellipsoid(&obj);
+    // A GLB with a node, a textured material and normals: the atlas.glb of a first unwrap.
+    let first = dir.path().join("first");
+    assert!(unwrap(&obj, &first, &["--charts", "2"]).status.success());
+    let input = dir.path().join("scene_in.glb");
+    std::fs::copy(first.join("atlas.glb"), &input).unwrap();
+    let out = dir.path().join("second");
+    let o = unwrap(&input, &out, &["--charts", "3"]);
+    assert!(o.status.success());
+    let scene = out.join("scene.glb");
+    assert!(scene.is_file() && out.join("scene_vertex_map.json").is_file());
+    let (before, after) =
+        (nuvo_geometry::load_mesh(&input).unwrap(), nuvo_geometry::load_mesh(&scene).unwrap());
+    assert_eq!(before.triangles.len(), after.triangles.len());
+    for f in 0..before.triangles.len() {
+        assert_eq!(before.corners(f), after.corners(f), "face {f} moved");
+    }
+    let new_uv = after.uv.as_ref().expect("TEXCOORD_0 written");
+    let baked = nuvo_geometry::load_mesh(&out.join("atlas.obj")).unwrap();
+    let baked_uv = baked.uv.unwrap();
+    for f in 0..after.triangles.len() {
+        for k in 0..3 {
+            let (a, b) = (
+                new_uv.coords[new_uv.triangles[f][k] as usize],
+                baked_uv.coords[baked_uv.triangles[f][k] as usize],
+            );
+            assert!(
+                (a[0] - b[0]).abs() < 1e-6 && (a[1] - b[1]).abs() < 1e-6,
+                "face {f} corner {k}: {a:?} vs {b:?}"
+            );
+        }
+    }
+    let json = |p: &Path| gltf::Gltf::open(p).unwrap().document.into_json();
+    let (a, b) = (json(&input), json(&scene));
+    assert_eq!(a.materials.len(), b.materials.len());
+    assert_eq!(a.nodes.len(), b.nodes.len());
+    assert_eq!(a.images.len(), b.images.len());
+}
+
+fn refused(input: &Path, out: &Path) -> String {
+    let o = nuvo().arg("unwrap").arg(input).arg("-o").arg(out).output().unwrap();
+    assert_eq!(o.status.code(), Some(1), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        !out.exists() || std::fs::read_dir(out).unwrap().next().is_none(),
+        "wrote into {}",
+        out.display()
+    );
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(err.lines().count(), 1, "one line: {err}");
+    err
+}
+
+#[test]
+fn bad_inputs_get_one_clear_error_and_nothing_is_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let path = |name: &str, text: &str| -> PathBuf {
+        let p = dir.path().join(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    };
+    let e = refused(&path("shape.stl", "solid x"), &out);
+    assert!(e.contains("shape.stl") && e.contains("unsupported input type `.stl`"), "{e}");
+    let e = refused(&path("empty.obj", ""), &out);
+    assert!(e.contains("empty.obj") && e.contains("empty"), "{e}");
+    let e = refused(&path("nan.obj", "v 0 0 0\nv 1 0 0\nv 0 nan 0\nf 1 2 3\n"), &out);
+    assert!(e.contains("nan.obj"), "{e}");
+    let e = refused(&dir.path().join("missing.glb"), &out);
+    assert!(e.contains("missing.glb"), "{e}");
+    let e = refused(&path("flat.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n"), &out);
+    assert!(e.contains("flat.obj") && e.contains("zero area"), "{e}");
+    let input = dir.path().join("ok.obj");
+    write_ellipsoid(&input);
+    let o = nuvo().arg("unwrap").arg(&input).args(["--charts", "zero"]).output().unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--charts zero"));
+}

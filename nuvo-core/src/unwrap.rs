@@ -1,0 +1,515 @@
+//! `nuvo unwrap`: from any input file to a resolved experiment config, by rules from measured
+//! properties of the input, each decision stated with the numbers behind it.
+//!
+//! The steps, in the order the CLI takes them:
+//! 1. [`input_kind`]: the extension and the content choose the source (`mesh`, `point_cloud`,
+//!    `density`);
+//! 2. for meshes, [`profile_mesh`] and [`choose_sampling`]: area-uniform samples for a clean
+//!    surface, visible ray hits for a fragmented one or one with hidden inner sheets;
+//! 3. [`recipe`]: the config text (the measured recipe of `configs/bunny.toml`, with the options
+//!    that hurt on fragmented meshes off for them);
+//! 4. [`chart_trials`] and [`choose_charts`]: the chart count, from how well `n` projection charts
+//!    can start the surface fold-free;
+//! 5. [`fit_steps`]: the step count that fits the time budget on this machine, from timed steps.
+//!
+//! The result is an ordinary config: written as `config.toml`, `nuvo train` reproduces the run.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use nuvo_geometry::mesh_source::SamplingMode;
+use nuvo_geometry::profile::MeshProfile;
+use nuvo_geometry::{GeometryError, GeometrySource, TriMesh};
+use serde::Serialize;
+
+use crate::batch::surface_samples;
+use crate::trainer::{TrainError, Trainer};
+use crate::warm_start::{Coverage, Projection, ProjectionPrior};
+
+pub use nuvo_geometry::profile::profile_mesh;
+
+/// What kind of geometry an input file holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum InputKind {
+    /// A triangle mesh (`.obj`, `.gltf`, `.glb`): trained on samples, baked onto itself.
+    Mesh,
+    /// Surface points (`.ply`, `.xyz`, `.txt`, `.pts`): per-point UVs, or a bake onto a given mesh.
+    PointCloud,
+    /// A density grid (`.npy`): baked onto its own marching-cubes mesh.
+    Density,
+}
+
+impl InputKind {
+    /// The geometry source that reads this kind.
+    pub fn source(self) -> &'static str {
+        match self {
+            InputKind::Mesh => "mesh",
+            InputKind::PointCloud => "point_cloud",
+            InputKind::Density => "density",
+        }
+    }
+}
+
+/// Why an input cannot be unwrapped.
+#[derive(Debug, thiserror::Error)]
+pub enum UnwrapError {
+    /// The file itself is the problem (missing, empty, unknown kind).
+    #[error("{path}: {message}")]
+    Input { path: PathBuf, message: String },
+    #[error(transparent)]
+    Geometry(#[from] GeometryError),
+    #[error(transparent)]
+    Train(#[from] TrainError),
+}
+
+fn input_error(path: &Path, message: impl Into<String>) -> UnwrapError {
+    UnwrapError::Input { path: path.to_owned(), message: message.into() }
+}
+
+/// The input extensions `nuvo unwrap` reads, by kind.
+pub const MESH_INPUTS: &[&str] = &["obj", "gltf", "glb"];
+pub const POINT_INPUTS: &[&str] = &["ply", "xyz", "txt", "pts"];
+pub const DENSITY_INPUTS: &[&str] = &["npy"];
+
+/// The kind of `path`, from its extension, after checking that it is a readable, non-empty file.
+/// A PLY file is read as points (its faces, if any, are not used; the CLI says so).
+pub fn input_kind(path: &Path) -> Result<InputKind, UnwrapError> {
+    let meta =
+        std::fs::metadata(path).map_err(|e| input_error(path, format!("cannot read the input: {e}")))?;
+    if meta.is_dir() {
+        return Err(input_error(path, "is a directory; give the mesh, point cloud or density grid file"));
+    }
+    if meta.len() == 0 {
+        return Err(input_error(path, "the file is empty"));
+    }
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).unwrap_or_default();
+    let is = |list: &[&str]| list.contains(&ext.as_str());
+    if is(MESH_INPUTS) {
+        Ok(InputKind::Mesh)
+    } else if is(POINT_INPUTS) {
+        Ok(InputKind::PointCloud)
+    } else if is(DENSITY_INPUTS) {
+        Ok(InputKind::Density)
+    } else {
+        let all: Vec<String> =
+            [MESH_INPUTS, POINT_INPUTS, DENSITY_INPUTS].concat().iter().map(|e| format!(".{e}")).collect();
+        Err(input_error(
+            path,
+            format!(
+                "unsupported input type `{}`; nuvo unwrap reads {}",
+                if ext.is_empty() { "(no extension)".to_owned() } else { format!(".{ext}") },
+                all.join(", ")
+            ),
+        ))
+    }
+}
+
+/// Whether a PLY file declares faces (it is then a mesh saved as PLY, of which only the vertices
+/// are read). Reads the header only; `false` when there is no readable header.
+pub fn ply_has_faces(path: &Path) -> bool {
+    use std::io::{BufRead, BufReader};
+    let Ok(f) = std::fs::File::open(path) else { return false };
+    for line in BufReader::new(f).split(b'\n').take(200).map_while(Result::ok) {
+        let line = String::from_utf8_lossy(&line);
+        let words: Vec<&str> = line.split_whitespace().collect();
+        if words.first() == Some(&"end_header") {
+            break;
+        }
+        if words.len() == 3 && words[0] == "element" && words[1] == "face" {
+            return words[2].parse::<u64>().is_ok_and(|n| n > 0);
+        }
+    }
+    false
+}
+
+/// One choice `nuvo unwrap` made, and why: printed, and written to `unwrap.json`.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Decision {
+    /// What was decided (`sampling`, `charts`, `steps`, ...).
+    pub what: String,
+    /// The choice, as the config spells it.
+    pub choice: String,
+    /// The rule and the measured numbers behind it.
+    pub why: String,
+}
+
+impl Decision {
+    fn new(what: &str, choice: impl ToString, why: impl Into<String>) -> Self {
+        Decision { what: what.to_owned(), choice: choice.to_string(), why: why.into() }
+    }
+}
+
+/// Visible-surface sampling once this share of the surface is hidden from every outside direction
+/// (inner sheets, bubbles). Clean meshes measure under 1% (narrow crevices); the marching-cubes
+/// meshes of `../shared/data` over 10% (BENCHMARKS.md, "nuvo unwrap").
+pub const HIDDEN_AREA_FOR_VISIBLE: f64 = 0.05;
+/// Visible-surface sampling once this many pieces each hold under 0.1% of the area (floaters).
+/// Clean meshes have a handful of pieces (a teapot's lid and handle, a character's eyes).
+pub const FRAGMENTS_FOR_VISIBLE: usize = 50;
+
+/// The sampling rule for a mesh (module docs): visible ray hits when the profile shows hidden
+/// surface or floaters, area-uniform otherwise.
+pub fn choose_sampling(p: &MeshProfile) -> (SamplingMode, Decision) {
+    let numbers = format!(
+        "{} faces, {} pieces ({} fragments under 0.1% of the area, {:.2}% of it; largest piece {:.1}%), \
+         {:.1}% of the surface hidden from outside",
+        p.faces,
+        p.components,
+        p.fragments,
+        100.0 * p.fragment_area,
+        100.0 * p.largest_component_area,
+        100.0 * p.hidden_area
+    );
+    if p.hidden_area >= HIDDEN_AREA_FOR_VISIBLE || p.fragments >= FRAGMENTS_FOR_VISIBLE {
+        let why = format!(
+            "{numbers}: hidden area ≥ {:.0}% or ≥ {FRAGMENTS_FOR_VISIBLE} fragments, as a marching-cubes mesh of a \
+             neural field has, so only what a camera sees is sampled",
+            100.0 * HIDDEN_AREA_FOR_VISIBLE
+        );
+        (SamplingMode::Visible, Decision::new("sampling", "visible", why))
+    } else {
+        let why = format!(
+            "{numbers}: a clean surface (hidden area < {:.0}%, < {FRAGMENTS_FOR_VISIBLE} fragments), so every face is \
+             sampled by area",
+            100.0 * HIDDEN_AREA_FOR_VISIBLE
+        );
+        (SamplingMode::Uniform, Decision::new("sampling", "uniform", why))
+    }
+}
+
+/// The orientation rule: a mesh whose surface points mostly escape through the back of their faces
+/// is wound inside out, and its normals are flipped (`geometry.flip_normals`), since the warm start
+/// projects each chart onto the side its normals face. Visible sampling orients every normal
+/// towards its camera anyway, so only area-uniform sampling needs it.
+pub fn choose_orientation(p: &MeshProfile, sampling: SamplingMode) -> Option<Decision> {
+    let flip = sampling == SamplingMode::Uniform && p.outward_escapes < 0.5;
+    flip.then(|| {
+        Decision::new(
+            "normals",
+            "flipped",
+            format!(
+                "only {:.0}% of the rays that leave the surface leave through the front of their face: the mesh is \
+                 wound inside out",
+                100.0 * p.outward_escapes
+            ),
+        )
+    })
+}
+
+/// How a recipe treats the input: a clean surface gets the bake's round-trip check and untangling
+/// (both measured to help on clean meshes and to hurt on fragmented ones; BENCHMARKS.md "Round-trip
+/// check", "Untangling").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RecipeInput<'a> {
+    pub kind: InputKind,
+    pub path: &'a Path,
+    /// Meshes only.
+    pub sampling: SamplingMode,
+    /// Meshes only: the mesh is wound inside out ([`choose_orientation`]).
+    pub flip_normals: bool,
+    pub charts: usize,
+    pub steps: u64,
+    pub seed: u64,
+    /// Density grids only: `[[min], [max]]` of the grid nodes, from a sidecar header.
+    pub bounds: Option<[[f32; 3]; 2]>,
+}
+
+/// The config text of a run (module docs). The recipe is `configs/bunny.toml`'s: small networks, a
+/// fast learning rate, the occlusion-aware projection warm start, chart support, the scale-free
+/// signed stretch; its weights were measured on the bunny and are checked across the whole
+/// benchmark suite (BENCHMARKS.md).
+pub fn recipe(r: &RecipeInput) -> String {
+    let path = toml::Value::String(r.path.to_string_lossy().into_owned());
+    let mut geometry = format!("source = \"{}\"\npath = {path}\n", r.kind.source());
+    let clean = match r.kind {
+        InputKind::Mesh => {
+            let mode = match r.sampling {
+                SamplingMode::Uniform => "uniform",
+                SamplingMode::Visible => "visible",
+            };
+            geometry += &format!("sampling = \"{mode}\"\n");
+            if r.flip_normals {
+                geometry += "flip_normals = true\n";
+            }
+            r.sampling == SamplingMode::Uniform
+        }
+        InputKind::PointCloud => true,
+        InputKind::Density => {
+            if let Some([lo, hi]) = r.bounds {
+                geometry += &format!("bounds = [{lo:?}, {hi:?}]\n");
+            }
+            false
+        }
+    };
+    // Fragmented inputs need more UV samples per step: their charts hold many pieces.
+    let batch_uv = if clean { 1024 } else { 2048 };
+    // The prior fades over 300 steps (the measured bunny setting), or the first 30% of a short run.
+    let warm = (r.steps * 3 / 10).clamp(1, 300);
+    let bake = if clean { "round_trip_tolerance = 0.1\nuntangle = true\n" } else { "" };
+    format!(
+        "# Written by `nuvo unwrap`; `nuvo train` on this file reproduces the run.\n\
+         seed = {seed}\n\n[geometry]\n{geometry}\n\
+         [model]\ncharts = {charts}\ndepth = 4\nwidth = 128\n\n\
+         [training]\nsteps = {steps}\nbatch_3d = 2048\nbatch_uv = {batch_uv}\nchart_support = 1e-3\n\n\
+         [optimizer]\nlr_mlp = 3e-3\n\n\
+         [warm_start]\nsteps = {warm}\nocclusion = true\n\n\
+         [losses.cycle_3d]\n[losses.cycle_2d]\n[losses.entropy]\n[losses.surface]\n\
+         [losses.cluster]\nweight = 1.5\n[losses.conformal]\nweight = 1.2\n\
+         [losses.stretch]\nweight = 2.0\nrelative = true\nsigned = true\narea = \"jacobian\"\n[losses.texture]\n\n\
+         [output]\n{bake}",
+        seed = r.seed,
+        charts = r.charts,
+        steps = r.steps,
+    )
+}
+
+/// How well `charts` projection charts start a sample of the surface (see [`Coverage`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct ChartTrial {
+    pub charts: usize,
+    #[serde(flatten)]
+    pub coverage: Coverage,
+}
+
+/// The chart counts [`choose_charts`] considers.
+pub const CHART_CANDIDATES: std::ops::RangeInclusive<usize> = 2..=8;
+/// Samples the chart trials fit and score.
+pub const TRIAL_SAMPLES: usize = 20_000;
+
+/// Fits the warm start's occlusion-aware orthographic charts (what training starts from) for each
+/// candidate count to one sample of `source`, and measures their [`Coverage`].
+pub fn chart_trials(source: &dyn GeometrySource, seed: u64) -> Result<Vec<ChartTrial>, UnwrapError> {
+    let sample = surface_samples(source, TRIAL_SAMPLES, seed).map_err(TrainError::from)?;
+    Ok(CHART_CANDIDATES
+        .map(|n| {
+            let prior =
+                ProjectionPrior::fit(&sample.points, &sample.normals, n, Projection::Orthographic, 0.3, true);
+            ChartTrial { charts: n, coverage: prior.coverage(&sample.points, &sample.normals) }
+        })
+        .collect())
+}
+
+/// A chart count is enough once its charts supervise this share of the surface.
+pub const ENOUGH_COVERAGE: f64 = 0.95;
+/// ... or once one more chart would add less than this to the share.
+pub const COVERAGE_GAIN: f64 = 0.01;
+
+/// The chart-count rule: the fewest charts whose projections start at least [`ENOUGH_COVERAGE`] of
+/// the surface fold-free and unoccluded, or past which one more chart gains less than
+/// [`COVERAGE_GAIN`]; the most candidates when neither happens. Fewer charts mean shorter seams, and
+/// what a projection cannot start fold-free the training must unfold, so coverage is what decides.
+pub fn choose_charts(trials: &[ChartTrial]) -> (usize, Decision) {
+    let listed: Vec<String> =
+        trials.iter().map(|t| format!("{}: {:.1}%", t.charts, 100.0 * t.coverage.supervised)).collect();
+    let pick = trials.iter().enumerate().find(|(k, t)| {
+        t.coverage.supervised >= ENOUGH_COVERAGE
+            || trials
+                .get(k + 1)
+                .is_some_and(|next| next.coverage.supervised - t.coverage.supervised < COVERAGE_GAIN)
+    });
+    let n = pick.map_or_else(|| trials.last().map_or(4, |t| t.charts), |(_, t)| t.charts);
+    let why = format!(
+        "share of the surface that n projection charts start fold-free and unoccluded ({}); the fewest charts \
+         reaching {:.0}% or gaining < {:.0} points with one more",
+        listed.join(", "),
+        100.0 * ENOUGH_COVERAGE,
+        100.0 * COVERAGE_GAIN
+    );
+    (n, Decision::new("charts", n, why))
+}
+
+/// Steps timed to estimate the speed of training.
+pub const TIMED_STEPS: u64 = 8;
+/// Steps after the warm start cost less than the timed ones (chart support prunes the charts a
+/// sample does not belong to); measured on the suite, the whole run averages this fraction of the
+/// timed step cost (BENCHMARKS.md, "nuvo unwrap").
+pub const MEAN_STEP_COST: f64 = 0.8;
+/// Fewest and most steps a fitted run gets: at least the planned 1000 (the recipe's 300-step warm
+/// start is fitted to the planned count, and 1000 steps were measured as the least that gives a
+/// usable atlas of the bunny; BENCHMARKS.md "Atlas quality").
+pub const MIN_STEPS: u64 = 1000;
+pub const MAX_STEPS: u64 = 4000;
+
+/// Times [`TIMED_STEPS`] steps of `trainer` (at step 0), puts it back as it was, and sets its step
+/// count to what fits `budget_seconds` (rounded down to a multiple of 50, so timing noise rarely
+/// changes it; within [`MIN_STEPS`]`..=`[`MAX_STEPS`]).
+pub fn fit_steps(trainer: &mut Trainer, budget_seconds: f64) -> Result<(u64, Decision), UnwrapError> {
+    let start = trainer.checkpoint();
+    // One untimed step first: it allocates the tape's buffers.
+    trainer.step()?;
+    let t = Instant::now();
+    for _ in 0..TIMED_STEPS {
+        trainer.step()?;
+    }
+    let per_step = t.elapsed().as_secs_f64() / TIMED_STEPS as f64;
+    trainer.restore(&start)?;
+    let raw = budget_seconds / (per_step * MEAN_STEP_COST).max(1e-6);
+    let steps = ((raw as u64) / 50 * 50).clamp(MIN_STEPS, MAX_STEPS);
+    trainer.set_total_steps(steps)?;
+    let why = format!(
+        "{:.0} ms per step timed at the start (≈{:.0} ms on average over a run), {budget_seconds:.0} s of \
+         training budget",
+        1e3 * per_step,
+        1e3 * per_step * MEAN_STEP_COST
+    );
+    Ok((steps, Decision::new("steps", steps, why)))
+}
+
+/// A density grid's node bounds from the JSON header beside it (`NAME.json` with `bounds_min` and
+/// `bounds_max`, as `../shared/data/density` has), if there is one.
+pub fn density_bounds(grid: &Path) -> Result<Option<[[f32; 3]; 2]>, UnwrapError> {
+    let header = grid.with_extension("json");
+    let Ok(text) = std::fs::read_to_string(&header) else { return Ok(None) };
+    let bad = |m: &str| input_error(&header, format!("the grid's header {m}"));
+    let json: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| bad(&format!("is not JSON: {e}")))?;
+    let corner = |key: &str| -> Result<Option<[f32; 3]>, UnwrapError> {
+        let Some(v) = json.get(key) else { return Ok(None) };
+        let a: Vec<f32> = v
+            .as_array()
+            .filter(|a| a.len() == 3)
+            .and_then(|a| a.iter().map(|x| x.as_f64().map(|x| x as f32)).collect())
+            .ok_or_else(|| bad(&format!("has a `{key}` that is not three numbers")))?;
+        Ok(Some([a[0], a[1], a[2]]))
+    };
+    match (corner("bounds_min")?, corner("bounds_max")?) {
+        (Some(lo), Some(hi)) => Ok(Some([lo, hi])),
+        _ => Ok(None),
+    }
+}
+
+/// Sanity of a loaded mesh for unwrapping beyond what loading checks: it must have area.
+pub fn check_mesh(path: &Path, mesh: &TriMesh) -> Result<(), UnwrapError> {
+    if !mesh.has_area() {
+        return Err(input_error(path, "every face has zero area: there is no surface to unwrap"));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn profile(hidden: f64, fragments: usize) -> MeshProfile {
+        MeshProfile {
+            vertices: 10,
+            faces: 10,
+            degenerate_faces: 0,
+            components: fragments + 1,
+            largest_component_area: 0.9,
+            fragments,
+            fragment_area: 0.01,
+            hidden_area: hidden,
+            outward_escapes: 0.9,
+        }
+    }
+
+    #[test]
+    fn sampling_is_visible_for_hidden_surface_or_floaters_only() {
+        assert_eq!(choose_sampling(&profile(0.01, 3)).0, SamplingMode::Uniform);
+        assert_eq!(choose_sampling(&profile(0.2, 3)).0, SamplingMode::Visible);
+        assert_eq!(choose_sampling(&profile(0.0, 500)).0, SamplingMode::Visible);
+        let (_, d) = choose_sampling(&profile(0.2, 3));
+        assert!(d.why.contains("20.0% of the surface hidden"), "{}", d.why);
+    }
+
+    fn trials(shares: &[f64]) -> Vec<ChartTrial> {
+        shares
+            .iter()
+            .enumerate()
+            .map(|(k, &s)| ChartTrial {
+                charts: k + 2,
+                coverage: Coverage { supervised: s, mean_facing: 0.8 },
+            })
+            .collect()
+    }
+
+    #[test]
+    fn inside_out_meshes_get_flipped_normals_when_sampled_by_area() {
+        let inverted = MeshProfile { outward_escapes: 0.1, ..profile(0.0, 0) };
+        assert!(choose_orientation(&inverted, SamplingMode::Uniform).is_some());
+        assert!(choose_orientation(&inverted, SamplingMode::Visible).is_none());
+        assert!(choose_orientation(&profile(0.0, 0), SamplingMode::Uniform).is_none());
+    }
+
+    #[test]
+    fn charts_are_the_fewest_that_cover_or_stop_gaining() {
+        assert_eq!(choose_charts(&trials(&[0.80, 0.96, 0.99])).0, 3);
+        assert_eq!(choose_charts(&trials(&[0.97, 0.99])).0, 2);
+        // 0.85 -> 0.855 gains half a point: stop at 3.
+        assert_eq!(choose_charts(&trials(&[0.70, 0.85, 0.855, 0.90])).0, 3);
+        // Never enough, always gaining: the most.
+        assert_eq!(choose_charts(&trials(&[0.5, 0.6, 0.7])).0, 4);
+    }
+
+    #[test]
+    fn input_kinds_follow_the_extension_and_bad_files_are_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let write = |name: &str, text: &str| {
+            let p = dir.path().join(name);
+            std::fs::write(&p, text).unwrap();
+            p
+        };
+        assert_eq!(input_kind(&write("a.OBJ", "v 0 0 0")).unwrap(), InputKind::Mesh);
+        assert_eq!(input_kind(&write("a.glb", "x")).unwrap(), InputKind::Mesh);
+        assert_eq!(input_kind(&write("a.xyz", "0 0 0")).unwrap(), InputKind::PointCloud);
+        assert_eq!(input_kind(&write("a.npy", "x")).unwrap(), InputKind::Density);
+        let e = input_kind(&write("a.stl", "solid")).unwrap_err().to_string();
+        assert!(e.contains("a.stl") && e.contains("unsupported input type `.stl`"), "{e}");
+        let e = input_kind(&write("b.obj", "")).unwrap_err().to_string();
+        assert!(e.contains("b.obj: the file is empty"), "{e}");
+        let e = input_kind(&dir.path().join("missing.obj")).unwrap_err().to_string();
+        assert!(e.contains("missing.obj: cannot read the input"), "{e}");
+    }
+
+    #[test]
+    fn ply_faces_are_found_in_the_header() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("m.ply");
+        std::fs::write(
+            &p,
+            "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nelement face 1\nend_header\n",
+        )
+        .unwrap();
+        assert!(ply_has_faces(&p));
+        std::fs::write(&p, "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n")
+            .unwrap();
+        assert!(!ply_has_faces(&p));
+    }
+
+    #[test]
+    fn the_recipe_is_a_valid_config_and_turns_bake_fixes_off_for_fragmented_meshes() {
+        let path = Path::new("/data/x.obj");
+        let base = RecipeInput {
+            kind: InputKind::Mesh,
+            path,
+            sampling: SamplingMode::Uniform,
+            flip_normals: false,
+            charts: 5,
+            steps: 900,
+            seed: 3,
+            bounds: None,
+        };
+        let clean = crate::config::from_str("clean", &recipe(&base)).unwrap().config;
+        assert_eq!((clean.model.charts, clean.training.steps, clean.seed), (5, 900, 3));
+        assert!(clean.output.untangle && clean.output.round_trip_tolerance > 0.0);
+        assert_eq!(clean.warm_start.unwrap().steps, 270);
+        let flipped = RecipeInput { flip_normals: true, ..base };
+        let c = crate::config::from_str("flipped", &recipe(&flipped)).unwrap().config;
+        assert_eq!(c.geometry.options["flip_normals"].as_bool(), Some(true));
+        assert!(!clean.geometry.options.contains_key("flip_normals"));
+        let unruly = RecipeInput { sampling: SamplingMode::Visible, ..base };
+        let c = crate::config::from_str("unruly", &recipe(&unruly)).unwrap().config;
+        assert!(!c.output.untangle && c.output.round_trip_tolerance == 0.0);
+        assert_eq!(c.geometry.options["sampling"].as_str(), Some("visible"));
+        let grid = RecipeInput {
+            kind: InputKind::Density,
+            bounds: Some([[-1.0, -2.0, -1.0], [1.0, 2.0, 1.0]]),
+            ..base
+        };
+        let c = crate::config::from_str("grid", &recipe(&grid)).unwrap().config;
+        assert_eq!(c.geometry.source, "density");
+        assert!(c.geometry.options["bounds"].to_string().contains("-2.0"));
+    }
+}
