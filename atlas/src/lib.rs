@@ -12,11 +12,12 @@
 //! | [`mod@render`], [`camera`] | z-buffer rasteriser producing triangle id / barycentrics / depth |
 //! | [`metrics`] | Boundary, Stretch, Conformal, Editability over seeded views (definitions there) |
 //! | [`uvstats`] | charts, flips, utilisation and overlaps of a UV layout |
+//! | [`partuv`] | the PartUV comparison's charts, seams, angular score, area distortions, packing |
 //! | [`untangle`] | turning flipped faces back by moving single UV vertices (the bake's option) |
 //! | [`load`] | choosing the mesh reader by extension |
 //!
-//! The exact metric definitions and defaults are in the [`metrics`] and [`uvstats`] module docs and
-//! in `atlas/README.md`.
+//! The exact metric definitions and defaults are in the [`metrics`], [`uvstats`] and [`partuv`]
+//! module docs and in `atlas/README.md`.
 
 #![warn(missing_docs)]
 
@@ -29,6 +30,7 @@ pub mod gltf_scene;
 pub mod load;
 pub mod metrics;
 pub mod pack;
+pub mod partuv;
 pub mod pictures;
 mod raster;
 pub mod render;
@@ -43,4 +45,5 @@ pub use camera::{Camera, orbit_views};
 pub use error::AtlasError;
 pub use metrics::{EvalOptions, Metrics, evaluate};
 pub use pack::AtlasLayout;
+pub use partuv::{PartUvMetrics, partuv_metrics};
 pub use render::{GBuffer, Pixel, render};

@@ -42,11 +42,12 @@ use serde::Serialize;
 
 use crate::camera::{Camera, MAX_IMAGE_SIDE, orbit_views};
 use crate::error::AtlasError;
+use crate::partuv::{PartUvMetrics, partuv_metrics};
 use crate::render::{GBuffer, render};
 use crate::uvstats::{
     DEFAULT_UV_RASTER, DEGENERATE_UV_AREA, UvStats, analyse_uv, degenerate_3d_faces, require_uv,
 };
-use crate::vecmath::{cross, dot, norm, scale, sub, v3};
+use crate::vecmath::{V3, cross, dot, norm, scale, sub, v3};
 
 /// Options of [`evaluate`]. `Default` gives the documented defaults.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
@@ -132,6 +133,9 @@ pub struct Metrics {
     pub image: ImageMetrics,
     /// The UV-space statistics.
     pub uv: UvStats,
+    /// The PartUV comparison's metric set (charts, seam length, angular score, area distortions,
+    /// packing efficiency; [`crate::partuv`]).
+    pub partuv: PartUvMetrics,
     /// The options that produced these numbers.
     pub options: EvalOptions,
 }
@@ -166,7 +170,8 @@ impl ImageParams {
 }
 
 /// All metrics of `mesh` (any frame) with its own UVs: image-space scores over the seeded orbit
-/// views plus the UV-space statistics. Errors: no UVs, an invalid mesh or options, nothing visible.
+/// views plus the UV-space statistics and the PartUV metric set ([`crate::partuv`]). Errors: no
+/// UVs, an invalid mesh or options, nothing visible.
 pub fn evaluate(mesh: &TriMesh, opts: &EvalOptions) -> Result<Metrics, AtlasError> {
     opts.check()?;
     require_uv(mesh)?;
@@ -174,7 +179,8 @@ pub fn evaluate(mesh: &TriMesh, opts: &EvalOptions) -> Result<Metrics, AtlasErro
     let cameras = orbit_views(&bounds, opts.views, opts.seed, opts.resolution, opts.resolution);
     let image = image_metrics(mesh, &cameras, &opts.image)?;
     let uv = analyse_uv(mesh, None, opts.uv_raster)?.stats;
-    Ok(Metrics { image, uv, options: *opts })
+    let partuv = partuv_metrics(mesh)?;
+    Ok(Metrics { image, uv, partuv, options: *opts })
 }
 
 /// Boundary, Stretch, Conformal and Editability of `mesh` seen from `cameras` (module docs).
@@ -241,15 +247,25 @@ fn face_distortion(mesh: &TriMesh, uv: &UvLayer) -> Vec<Option<[f32; 2]>> {
             let abs_cos = if area_uv <= DEGENERATE_UV_AREA {
                 1.0
             } else {
-                // T, B up to the common factor 1/det, which |cos| ignores.
-                let t = sub(scale(e1, dv2), scale(e2, dv1));
-                let bt = sub(scale(e2, du1), scale(e1, du2));
-                let den = norm(t) * norm(bt);
-                if den > 0.0 { (dot(t, bt) / den).abs().min(1.0) } else { 1.0 }
+                abs_cos_tangents(e1, e2, [du1, dv1, du2, dv2]).unwrap_or(1.0)
             };
             Some([(area_uv / area3) as f32, abs_cos as f32])
         })
         .collect()
+}
+
+/// `|cos(T, B)|` of a triangle with 3-D edges `e1 = p1 − p0`, `e2 = p2 − p0` and UV edges
+/// `[du1, dv1, du2, dv2]` (`uv1 − uv0`, `uv2 − uv0`): `T = ∂p/∂u`, `B = ∂p/∂v`, the columns of the
+/// Jacobian of its affine UV→3-D map. `None` when `T` or `B` vanishes (a UV-degenerate triangle, or
+/// one degenerate in 3-D along a UV axis). The one formula of Conformal here and of the angular
+/// score in [`crate::partuv`].
+pub(crate) fn abs_cos_tangents(e1: V3, e2: V3, duv: [f64; 4]) -> Option<f64> {
+    let [du1, dv1, du2, dv2] = duv;
+    // T, B up to the common factor 1/det, which |cos| ignores.
+    let t = sub(scale(e1, dv2), scale(e2, dv1));
+    let bt = sub(scale(e2, du1), scale(e1, du2));
+    let den = norm(t) * norm(bt);
+    (den > 0.0).then(|| (dot(t, bt) / den).abs().min(1.0))
 }
 
 /// The scores of one rendered view, `None` when it has no measurable pixel.

@@ -1,4 +1,5 @@
-//! `nuvo eval`: the paper's metrics and UV statistics of a mesh's own UVs, as a table or JSON.
+//! `nuvo eval`: the paper's metrics, UV statistics and the PartUV metric set of a mesh's own UVs, as
+//! a table or JSON.
 
 use std::path::PathBuf;
 
@@ -97,6 +98,36 @@ pub fn table(r: &EvalReport) -> String {
         ("  on mesh creases", format!("{} of them (the surface turns back there)", uv.flipped_on_creases)),
         ("degenerate UV faces", uv.degenerate_uv_faces.to_string()),
         ("degenerate 3-D faces", uv.degenerate_3d_faces.to_string()),
+    ];
+    for (name, value) in rows {
+        s += &format!("  {name:<22}{value}\n");
+    }
+    let p = &r.metrics.partuv;
+    let square = if p.uv_in_unit_square {
+        "[0,1]²".to_string()
+    } else {
+        format!("the UVs' bounding square, side {:.4}", p.atlas_side)
+    };
+    s += &format!("PartUV metric set (UVs measured in {square}):\n");
+    let rows: [(&str, String); 6] = [
+        ("charts", p.charts.to_string()),
+        ("seam length", format!("{:.4}", p.seam_length)),
+        (
+            "angular score",
+            format!("{:.4} ({} degenerate faces skipped)", p.angular_score, p.angular_skipped_faces),
+        ),
+        (
+            "area distortion",
+            format!(
+                "{:.4} (worst chart; {} charts unmeasurable)",
+                p.area_distortion, p.area_unmeasured_charts
+            ),
+        ),
+        (
+            "overall area dist.",
+            format!("{:.4} ({} faces skipped)", p.overall_area_distortion, p.area_skipped_faces),
+        ),
+        ("packing efficiency", format!("{:.4}", p.packing_efficiency)),
     ];
     for (name, value) in rows {
         s += &format!("  {name:<22}{value}\n");

@@ -59,7 +59,20 @@ fn spot_gives_a_table_and_json_and_pictures() {
     let o = nuvo(&["eval", p.to_str().unwrap(), "--views", "3", "--resolution", "200"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let table = String::from_utf8(o.stdout).unwrap();
-    for row in ["Boundary", "Stretch", "Conformal", "Editability", "charts", "UV utilisation"] {
+    for row in [
+        "Boundary",
+        "Stretch",
+        "Conformal",
+        "Editability",
+        "charts",
+        "UV utilisation",
+        "PartUV metric set",
+        "seam length",
+        "angular score",
+        "area distortion",
+        "overall area dist.",
+        "packing efficiency",
+    ] {
         assert!(table.contains(row), "{table}");
     }
     let dir = tempfile::tempdir().unwrap();
@@ -81,6 +94,17 @@ fn spot_gives_a_table_and_json_and_pictures() {
     assert!(b > 0.5 && b < 1.0, "{b}");
     assert_eq!(v["faces"], 5856);
     assert_eq!(v["metrics"]["options"]["views"], 3);
+    // The PartUV metric set, under the names the benchmark script reads.
+    let partuv = &v["metrics"]["partuv"];
+    assert_eq!(partuv["charts"], v["metrics"]["uv"]["charts"], "{partuv}");
+    for key in
+        ["seam_length", "angular_score", "area_distortion", "overall_area_distortion", "packing_efficiency"]
+    {
+        let x = partuv[key].as_f64().unwrap_or_else(|| panic!("metrics.partuv.{key} missing: {partuv}"));
+        assert!(x.is_finite() && x > 0.0, "{key} = {x}");
+    }
+    assert!(partuv["area_distortion"].as_f64().unwrap() >= 1.0);
+    assert!(partuv["angular_score"].as_f64().unwrap() <= 1.0);
     for f in ["uv_layout.png", "checker.png", "checker_view_0.png"] {
         assert!(pics.join(f).is_file(), "{f} not written");
     }
