@@ -57,16 +57,16 @@ pub fn load_obj(path: &Path) -> Result<TriMesh, GeometryError> {
     if mesh.triangles.is_empty() {
         return Err(GeometryError::invalid(path, "the mesh has no faces"));
     }
-    if let Some((positions, triangles)) = in_file_order(path, &mesh) {
-        mesh.positions = positions;
-        mesh.triangles = triangles;
+    if let Some(numbered) = in_file_order(path, &mesh) {
+        mesh.positions = numbered.positions;
+        mesh.triangles = numbered.triangles;
     }
     mesh.validate().map_err(|m| GeometryError::invalid(path, m))?;
     Ok(mesh)
 }
 
 /// The mesh's vertices in the file's own order (every `v` line, referenced or not) and its faces
-/// indexing them, or `None` when the file's text does not match what `tobj` read.
+/// indexing them (no UVs), or `None` when the file's text does not match what `tobj` read.
 ///
 /// `tobj` numbers the vertices of each object in the order the faces first use them, so a user's
 /// vertex `i` would not be ours; a tool that hands UVs back to the user's mesh must keep the file's
@@ -74,7 +74,7 @@ pub fn load_obj(path: &Path) -> Result<TriMesh, GeometryError> {
 /// `tobj`; this pass re-reads only the `v` and `f` lines, fan-triangulates polygons as `tobj` does,
 /// and is used only if every corner lands on the same position as `tobj`'s, so it can never
 /// change the geometry, only its numbering.
-fn in_file_order(path: &Path, mesh: &TriMesh) -> Option<(Vec<[f32; 3]>, Vec<[u32; 3]>)> {
+fn in_file_order(path: &Path, mesh: &TriMesh) -> Option<TriMesh> {
     let text = std::fs::read_to_string(path).ok()?;
     let mut positions: Vec<[f32; 3]> = Vec::new();
     let mut triangles: Vec<[u32; 3]> = Vec::with_capacity(mesh.triangles.len());
@@ -109,7 +109,7 @@ fn in_file_order(path: &Path, mesh: &TriMesh) -> Option<(Vec<[f32; 3]>, Vec<[u32
             .iter()
             .zip(&mesh.triangles)
             .all(|(a, b)| (0..3).all(|k| positions[a[k] as usize] == mesh.positions[b[k] as usize]));
-    same.then_some((positions, triangles))
+    same.then_some(TriMesh { positions, triangles, uv: None })
 }
 
 /// Counts `f` lines whose corners all carry a `vt` index, and those with some corner without one.
