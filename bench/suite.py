@@ -172,16 +172,18 @@ def select(items, only):
 # running things
 # ----------------------------------------------------------------------------------------------
 
-def run_logged(cmd, log_path, timeout, stdout_path=None):
+def run_logged(cmd, log_path, timeout, stdout_path=None, stats=None):
     """Runs cmd in its own process group with stdout+stderr into log_path (stdout into stdout_path
     instead, if given). Returns (returncode or None on timeout, wall seconds, reason or None).
-    On Ctrl-C the child's group is killed and KeyboardInterrupt propagates."""
+    If `stats` is a dict, it gets the run's CPU seconds and those of other processes on the machine
+    meanwhile (`machine_cpu`). On Ctrl-C the child's group is killed and KeyboardInterrupt propagates."""
     os.makedirs(os.path.dirname(os.path.abspath(log_path)), exist_ok=True)
     with open(log_path, "w") as log:
         log.write("$ " + shlex.join(cmd) + "\n")
         log.flush()
         out = open(stdout_path, "w") if stdout_path else log
         try:
+            cpu0, busy0 = _children_cpu(), _machine_busy()
             t0 = time.perf_counter()
             try:
                 p = subprocess.Popen(cmd, stdout=out, stderr=log, stdin=subprocess.DEVNULL,
@@ -200,12 +202,44 @@ def run_logged(cmd, log_path, timeout, stdout_path=None):
                 log.write("\n[suite.py] interrupted\n")
                 raise
             wall = time.perf_counter() - t0
+            if stats is not None:
+                stats.update(machine_cpu(wall, _children_cpu() - cpu0, busy0, _machine_busy()))
         finally:
             if stdout_path:
                 out.close()
     if rc != 0:
         return rc, wall, f"exit {rc}: {last_error_line(log_path)}"
     return rc, wall, None
+
+
+def _children_cpu():
+    """User + system CPU seconds of this process's waited-for children (and theirs) so far."""
+    import resource  # noqa: PLC0415 -- POSIX only
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def _machine_busy():
+    """Busy CPU seconds of the whole machine since boot (/proc/stat), None where unreadable."""
+    try:
+        with open("/proc/stat") as fh:
+            f = [int(x) for x in fh.readline().split()[1:]]
+        idle = f[3] + (f[4] if len(f) > 4 else 0)  # idle + iowait
+        busy = sum(f[:8]) - idle  # user nice system idle iowait irq softirq steal
+        return busy / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def machine_cpu(wall, own_cpu, busy0, busy1):
+    """What else ran during a timed run: `other_cpu_share` is the CPU time of other processes over
+    the machine's capacity (wall x cores) in that time, 0 on an otherwise idle machine."""
+    st = {"cpu_seconds": round(own_cpu, 3)}
+    if busy0 is not None and busy1 is not None and wall > 0:
+        other = max(0.0, (busy1 - busy0) - own_cpu)
+        st["other_cpu_seconds"] = round(other, 2)
+        st["other_cpu_share"] = round(other / (wall * (os.cpu_count() or 1)), 3)
+    return st
 
 
 def _kill_group(p):
@@ -274,8 +308,9 @@ def run_nuvo(item, args, out):
     cmd = [args.nuvo, "unwrap", item.path, "-o", d] + shlex.split(args.nuvo_args or "")
     rec = {"tool": "nuvo", "item": item.name, "group": item.group, "input": item.path,
            "command": shlex.join(cmd), "started": now(), "load_before": load_average()}
-    rc, wall, reason = run_logged(cmd, os.path.join(d, "unwrap.log"), args.timeout)
-    rec.update(returncode=rc, wall_seconds=wall, seconds=wall)
+    stats = {}
+    rc, wall, reason = run_logged(cmd, os.path.join(d, "unwrap.log"), args.timeout, stats=stats)
+    rec.update(returncode=rc, wall_seconds=wall, seconds=wall, **stats)
     if reason is None:
         m = read_json(os.path.join(d, "metrics.json"))
         if m is None:
@@ -298,8 +333,9 @@ def run_xatlas(item, args, out):
            "--name", item.xatlas_name]
     rec = {"tool": "xatlas", "item": item.xatlas_name, "input": item.xatlas_mesh,
            "command": shlex.join(cmd), "started": now(), "load_before": load_average()}
-    rc, wall, reason = run_logged(cmd, os.path.join(d, "unwrap.log"), args.timeout)
-    rec.update(returncode=rc, wall_seconds=wall)
+    stats = {}
+    rc, wall, reason = run_logged(cmd, os.path.join(d, "unwrap.log"), args.timeout, stats=stats)
+    rec.update(returncode=rc, wall_seconds=wall, **stats)
     xj = read_json(os.path.join(d, "xatlas.json"))
     if xj and xj.get("error"):
         reason = "xatlas: " + xj["error"]
@@ -370,7 +406,7 @@ COLUMNS = [  # (key, md header, md format)
 CSV_EXTRA = ["input", "note", "reason", "proxy", "charts_source", "uv_charts", "charts_reported_by_xatlas",
              "utilisation", "xatlas_seconds_with_io", "process_wall_seconds", "eval_seconds",
              "eval_views", "eval_resolution", "bake_faces", "bake_flipped_faces", "bake_overlapping_faces",
-             "load_before", "finished"]
+             "cpu_seconds", "other_cpu_share", "load_before", "finished"]
 
 
 def _get(d, *keys):
@@ -426,6 +462,8 @@ def nuvo_row(item, rec, out):
         return None
     row["finished"] = rec.get("finished")
     row["load_before"] = rec.get("load_before")
+    row["cpu_seconds"] = rec.get("cpu_seconds")
+    row["other_cpu_share"] = rec.get("other_cpu_share")
     row["process_wall_seconds"] = rec.get("wall_seconds")
     if rec.get("status") != "ok":
         row.update(success="no: " + str(rec.get("reason")), reason=rec.get("reason"))
@@ -453,6 +491,8 @@ def xatlas_row(item, rec, out):
         return None
     row["finished"] = rec.get("finished")
     row["load_before"] = rec.get("load_before")
+    row["cpu_seconds"] = rec.get("cpu_seconds")
+    row["other_cpu_share"] = rec.get("other_cpu_share")
     row["process_wall_seconds"] = rec.get("wall_seconds")
     row["xatlas_seconds_with_io"] = rec.get("seconds_with_io")
     row["eval_seconds"] = rec.get("eval_seconds")
@@ -507,6 +547,14 @@ def _median(v):
     return statistics.median(v) if v else None
 
 
+SHARED_LIMIT = 0.10  # other_cpu_share above which a timing is marked as taken on a shared machine
+
+
+def shared(row):
+    share = row.get("other_cpu_share")
+    return isinstance(share, (int, float)) and share > SHARED_LIMIT
+
+
 def aggregate(rows):
     """Per tool and group, like the PartUV paper's table. Rows that are n/a (point clouds for
     xatlas) and xatlas rows standing in for a density grid (a copy of its mesh's row) are left out."""
@@ -531,7 +579,7 @@ def aggregate(rows):
             fmt(_mean(_vals(ok, "overall_area_distortion")), "{:.3f}"),
             fmt(_mean(_vals(ok, "packing_efficiency")), "{:.3f}"),
             fmt(_mean(_vals(ok, "editability")), "{:.4f}"),
-            fmt(_mean(_vals(ok, "time_s")), "{:.2f}"),
+            fmt(_mean(_vals(ok, "time_s")), "{:.2f}") + (" †" if any(shared(r) for r in ok) else ""),
         ])
     return table
 
@@ -614,10 +662,14 @@ def write_report(out, rows, meta):
     if meta.get("resumed"):
         lines.append(f"- resumed: {meta['resumed']} tool runs taken from earlier sittings (their "
                      "`suite_item.json` has the date)")
+    def cell(r, k, f):
+        text = fmt(r.get(k), f)
+        if k == "time_s" and text and shared(r):
+            text += " †"
+        return md_cell(text, 90 if k == "success" else None)
+
     lines += ["", "## Per item", "",
-              md_table([h for _, h, _ in COLUMNS],
-                       [[md_cell(fmt(r.get(k), f), 90 if k == "success" else None) for k, _, f in COLUMNS]
-                        for r in rows]), ""]
+              md_table([h for _, h, _ in COLUMNS], [[cell(r, k, f) for k, _, f in COLUMNS] for r in rows]), ""]
     notes = [
         "- time s: nuvo, the wall time of the whole `nuvo unwrap` process (reading, training, baking, "
         "exports, its own metrics); xatlas, the xatlas call alone (`suite.csv` has it with OBJ I/O "
@@ -630,6 +682,8 @@ def write_report(out, rows, meta):
         "- Boundary, Stretch, Conformal, Editability: the Nuvo paper's metrics. xatlas atlases are scored "
         "by `nuvo eval --json` (16 views at 800 px); nuvo's by its own run (`eval_views`, "
         "`eval_resolution` in `suite.csv`).",
+        f"- †: other processes used more than {SHARED_LIMIT:.0%} of the machine's CPU time while that run "
+        "was timed (`other_cpu_share` in `suite.csv`, from /proc/stat): its time is not a clean measurement.",
         "- flipped and overlapping faces: `metrics.uv` for both tools (the nuvo bake's own counts are "
         "in `suite.csv` as `bake_*`).",
         "- a density grid's xatlas row is xatlas on the grid's marching-cubes mesh (the matching "
