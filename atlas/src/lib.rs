@@ -13,6 +13,7 @@
 //! | [`metrics`] | Boundary, Stretch, Conformal, Editability over seeded views (definitions there) |
 //! | [`uvstats`] | charts, flips, utilisation and overlaps of a UV layout |
 //! | [`partuv`] | the PartUV comparison's charts, seams, angular score, area distortions, packing |
+//! | [`refine`] | local/global ARAP refinement of each UV island from its current UVs, never adding flips |
 //! | [`untangle`] | turning flipped faces back by moving single UV vertices (the bake's option) |
 //! | [`load`] | choosing the mesh reader by extension |
 //!
@@ -33,6 +34,7 @@ pub mod pack;
 pub mod partuv;
 pub mod pictures;
 mod raster;
+pub mod refine;
 pub mod render;
 #[cfg(test)]
 mod testmesh;
