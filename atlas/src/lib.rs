@@ -7,6 +7,7 @@
 //! |---|---|
 //! | [`mod@bake`] | per-vertex chart probabilities + chart UVs → one UV layer in the packed atlas |
 //! | [`pack`] | grid packing of the `n` square charts, with gutters, as affine maps |
+//! | [`islands`] | repacking a layout's UV islands at one texel density, rotated, with gutters |
 //! | [`export`] | OBJ + MTL and binary glTF writers, in the input's own coordinates |
 //! | [`pictures`] | UV layout, labelled checkerboard, textured renders, chart-grid (normal) PNGs |
 //! | [`mod@render`], [`camera`] | z-buffer rasteriser producing triangle id / barycentrics / depth |
@@ -28,6 +29,7 @@ pub mod error;
 pub mod export;
 mod font;
 pub mod gltf_scene;
+pub mod islands;
 pub mod load;
 pub mod metrics;
 pub mod pack;
