@@ -23,7 +23,10 @@ use crate::train::{Progress, bake_into_report};
 
 /// Default training budget in seconds: with loading, planning and the bake, a 100k-face mesh takes
 /// under two minutes on 2 cores (BENCHMARKS.md, "nuvo unwrap").
-pub const DEFAULT_TIME_BUDGET: f64 = 80.0;
+pub const DEFAULT_TIME_BUDGET: f64 = 90.0;
+/// Training stops at this multiple of the budget whatever the fitted step count, in case the
+/// machine got slower after the steps were timed (then `nuvo train config.toml` may stop elsewhere).
+pub const SAFETY_STOP: f64 = 1.3;
 
 #[derive(clap::Args)]
 pub struct UnwrapArgs {
@@ -100,6 +103,7 @@ pub fn run_unwrap(args: &UnwrapArgs) -> anyhow::Result<()> {
         flip_normals: false,
         charts: charts.unwrap_or(4),
         steps: planned_steps(&args.set)?,
+        stop_after_seconds: Some(SAFETY_STOP * args.time_budget),
         seed: args.seed,
         bounds: None,
     };
@@ -191,15 +195,23 @@ pub fn run_unwrap(args: &UnwrapArgs) -> anyhow::Result<()> {
         return Ok(());
     }
 
-    // 4. The trainer, and the steps that fit the budget.
-    let mut trainer = Trainer::with_source(&loaded, source, &LossRegistry::with_builtins())?;
+    // 4. The steps that fit the budget: timed on a trainer of the planned run, then the run's own
+    // trainer on the same source (the warm start's length follows the step count).
+    let losses = LossRegistry::with_builtins();
+    let mut trainer = Trainer::with_source(&loaded, source, &losses)?;
     if user_set("training.steps") {
         decisions.push(decision("steps", trainer.total_steps(), "set with --set training.steps"));
     } else {
-        let (_, d) = fit_steps(&mut trainer, args.time_budget)?;
+        let (steps, d) = fit_steps(&mut trainer, args.time_budget)?;
         println!("{}: {} ({})", d.what, d.choice, d.why);
         decisions.push(d);
+        if steps != trainer.total_steps() {
+            recipe_input.steps = steps;
+            let loaded = resolve(&recipe_input, &args.set, &out)?;
+            trainer = Trainer::with_source(&loaded, trainer.into_source(), &losses)?;
+        }
     }
+    let loaded = resolve(&recipe_input, &args.set, &out)?;
     let planned = started.elapsed().as_secs_f64();
 
     // 5. Train, bake, export, measure.
@@ -252,8 +264,7 @@ pub fn run_unwrap(args: &UnwrapArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The steps the recipe plans for: a `--set training.steps=N`, else the least a fitted run gets
-/// ([`nuvo_core::unwrap::MIN_STEPS`]; the fit only adds steps).
+/// The steps the recipe plans for: a `--set training.steps=N`, else 1000 until the budget is fitted.
 fn planned_steps(overrides: &[String]) -> anyhow::Result<u64> {
     for s in overrides {
         if let Some((k, v)) = s.split_once('=')
@@ -265,7 +276,7 @@ fn planned_steps(overrides: &[String]) -> anyhow::Result<u64> {
                 .map_err(|_| anyhow::anyhow!("--set {s}: training.steps must be a whole number"));
         }
     }
-    Ok(nuvo_core::unwrap::MIN_STEPS)
+    Ok(1000)
 }
 
 fn decision(what: &str, choice: impl ToString, why: &str) -> Decision {

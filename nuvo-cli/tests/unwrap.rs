@@ -121,6 +121,14 @@ fn a_new_mesh_unwraps_with_no_config_and_keeps_its_vertices_and_faces() {
             }
         }
     }
+    // The layout is refined and packed island by island, and the counts are of what was written.
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap();
+    assert_eq!(metrics["layout"]["packing"], "islands");
+    let refine = &metrics["layout"]["refine"];
+    assert!(refine["flipped_after"].as_u64().unwrap() <= refine["flipped_before"].as_u64().unwrap());
+    assert_eq!(metrics["layout"]["islands"], metrics["metrics"]["partuv"]["charts"]);
+    assert_eq!(metrics["metrics"]["partuv"]["uv_in_unit_square"], true);
     // unwrap.json has the decisions and the numbers behind them.
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("unwrap.json")).unwrap()).unwrap();

@@ -253,6 +253,15 @@ pub struct OutputConfig {
     /// scanned surface, where a smooth map of 3-D position cannot help mirroring them) turn back.
     /// The flipped-face count never rises. Off by default, as the paper bakes the map as it is.
     pub untangle: bool,
+    /// Refine the baked islands towards isometry (not in the paper; `nuvo_atlas::refine`): a
+    /// local/global ARAP solve per UV island, started from the networks' UVs, kept only where it
+    /// adds no flipped face and does not lower the island's angular score. Off by default (the
+    /// paper's bake); `nuvo unwrap` turns it on.
+    pub refine: bool,
+    /// How the atlas is laid out: `"squares"` (default, the paper's: one square cell per chart) or
+    /// `"islands"` (not in the paper; `nuvo_atlas::islands`: every UV island packed on its own at
+    /// one texel density for the whole atlas, rotated to fit, with `gutter` texels between islands).
+    pub packing: Packing,
     /// Views of the metrics (the paper's protocol: random views on a sphere).
     pub eval_views: usize,
     /// Side of each metrics view in pixels.
@@ -273,12 +282,25 @@ impl Default for OutputConfig {
             gutter: 4,
             round_trip_tolerance: 0.0,
             untangle: false,
+            refine: false,
+            packing: Packing::Squares,
             eval_views: 16,
             eval_resolution: 800,
             renders: 4,
             render_resolution: 512,
         }
     }
+}
+
+/// How the baked atlas is laid out (`output.packing`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Packing {
+    /// One square cell of a grid per chart (the paper's layout).
+    #[default]
+    Squares,
+    /// Each UV island packed on its own at one texel density (`nuvo_atlas::islands`).
+    Islands,
 }
 
 /// A config that failed to load, with where and why.
@@ -753,6 +775,19 @@ mod tests {
             assert!(e.contains("training.chart_support") && e.contains("below 1"), "{bad}: {e}");
         }
         assert!(from_str("c.toml", &format!("{MINIMAL}[training]\nchart_support = 1e-4\n")).is_ok());
+    }
+
+    #[test]
+    fn packing_and_refinement_default_to_the_papers_bake_and_name_a_typo() {
+        let c = from_str("c.toml", MINIMAL).unwrap().config;
+        assert_eq!((c.output.packing, c.output.refine), (Packing::Squares, false));
+        let c = from_str("c.toml", &format!("{MINIMAL}[output]\npacking = \"islands\"\nrefine = true\n"))
+            .unwrap();
+        assert_eq!((c.config.output.packing, c.config.output.refine), (Packing::Islands, true));
+        let e = from_str("c.toml", &format!("{MINIMAL}[output]\npacking = \"island\"\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("packing") && e.contains("islands"), "{e}");
     }
 
     #[test]

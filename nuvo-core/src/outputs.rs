@@ -27,16 +27,19 @@ use nuvo_atlas::AtlasError;
 use nuvo_atlas::bake::{BakeOptions, BakeReport, ChartFields, RoundTrip, bake};
 use nuvo_atlas::camera::orbit_views;
 use nuvo_atlas::export::{GlbOptions, glb_vertex_map, write_glb, write_obj};
+use nuvo_atlas::islands::{IslandPacking, pack_islands};
 use nuvo_atlas::metrics::{EvalOptions, Metrics, evaluate};
 use nuvo_atlas::pack::AtlasLayout;
 use nuvo_atlas::pictures::{
     ChartGrid, chart_grid_image, checkerboard, pack_images, png_bytes, render_textured, uv_layout, write_png,
 };
+use nuvo_atlas::refine::{RefineOptions, RefineReport, refine_islands};
+use nuvo_atlas::uvstats::{UvAnalysis, analyse_uv};
 use nuvo_geometry::{GeometryError, Similarity, TriMesh};
 use nuvo_losses::Networks;
 use serde::Serialize;
 
-use crate::config::OutputConfig;
+use crate::config::{OutputConfig, Packing};
 use crate::trainer::{AtlasFields, Trainer};
 
 /// Output file names.
@@ -96,13 +99,44 @@ struct VertexMap {
     glb_to_input: Vec<u32>,
 }
 
+/// What refinement and island packing did (`output.refine`, `output.packing`).
+#[derive(Clone, Debug, Serialize)]
+pub struct LayoutSummary {
+    /// The layout written.
+    pub packing: Packing,
+    /// The refinement's report, when it ran.
+    pub refine: Option<RefineReport>,
+    /// Islands packed, with `packing = "islands"`.
+    pub islands: Option<usize>,
+}
+
+/// Refines and packs the baked layout as `opts` asks (both off: the bake as it is).
+fn finish_layout(mesh: TriMesh, opts: &OutputConfig) -> Result<(TriMesh, LayoutSummary), OutputError> {
+    let mut mesh = mesh;
+    let mut summary = LayoutSummary { packing: opts.packing, refine: None, islands: None };
+    if opts.refine {
+        let refined = refine_islands(&mesh, &RefineOptions::default())?;
+        mesh = refined.mesh;
+        summary.refine = Some(refined.report);
+    }
+    if opts.packing == Packing::Islands {
+        let packing = IslandPacking { resolution: opts.atlas_resolution, gutter: opts.gutter, rotate: true };
+        let packed = pack_islands(&mesh, &packing)?;
+        mesh = packed.mesh;
+        summary.islands = Some(packed.islands);
+    }
+    Ok((mesh, summary))
+}
+
 /// What `metrics.json` holds.
 #[derive(Clone, Debug, Serialize)]
 pub struct OutputMetrics {
     /// The paper's metrics of the baked mesh.
     pub metrics: Metrics,
-    /// The bake's findings.
+    /// The bake's findings (flips and overlaps counted on the layout written).
     pub bake: BakeSummary,
+    /// Refinement and packing after the bake.
+    pub layout: LayoutSummary,
     /// Steps trained.
     pub steps: u64,
 }
@@ -171,6 +205,12 @@ fn bake_and_measure(
         &layout,
         &options,
     )?;
+    let (layout_mesh, finished) = finish_layout(baked.mesh, opts)?;
+    let baked = nuvo_atlas::bake::Baked { mesh: layout_mesh, ..baked };
+    // Refinement and packing move UVs: count flips and overlaps again on what is written.
+    let recount = (finished.refine.is_some() || finished.islands.is_some())
+        .then(|| analyse_uv(&baked.mesh, Some(&baked.face_chart), opts.atlas_resolution))
+        .transpose()?;
     let mut files = Vec::new();
     let path = |name: &str| dir.join(name);
 
@@ -217,7 +257,8 @@ fn bake_and_measure(
     let metrics = evaluate(&baked.mesh, &eval)?;
     let summary = OutputMetrics {
         metrics,
-        bake: summarize(&baked.report, &baked.face_chart, n),
+        bake: summarize(&baked.report, recount.as_ref(), &baked.face_chart, n),
+        layout: finished,
         steps: trainer.step_index(),
     };
     let json = serde_json::to_string_pretty(&summary)
@@ -228,17 +269,28 @@ fn bake_and_measure(
     Ok(OutputReport { files, baked_uv: baked.mesh.uv, metrics: Some(summary) })
 }
 
-fn summarize(r: &BakeReport, face_chart: &[u32], n: usize) -> BakeSummary {
+/// The bake's counts; flips, overlaps and degenerate faces from `recount` when refinement or
+/// packing changed the layout after the bake.
+fn summarize(r: &BakeReport, recount: Option<&UvAnalysis>, face_chart: &[u32], n: usize) -> BakeSummary {
     let mut faces_per_chart = vec![0; n];
     for &c in face_chart {
         faces_per_chart[c as usize] += 1;
     }
+    let (flipped, on_creases, overlapping, degenerate) = match recount {
+        Some(a) => (a.flipped.len(), a.stats.flipped_on_creases, a.overlapping.len(), a.degenerate_uv.len()),
+        None => (
+            r.flipped_faces.len(),
+            r.stats.flipped_on_creases,
+            r.overlapping_faces.len(),
+            r.degenerate_uv_faces.len(),
+        ),
+    };
     BakeSummary {
         faces: face_chart.len(),
-        flipped_faces: r.flipped_faces.len(),
-        flipped_on_creases: r.stats.flipped_on_creases,
-        overlapping_faces: r.overlapping_faces.len(),
-        degenerate_uv_faces: r.degenerate_uv_faces.len(),
+        flipped_faces: flipped,
+        flipped_on_creases: on_creases,
+        overlapping_faces: overlapping,
+        degenerate_uv_faces: degenerate,
         split_vertices: r.split_vertices,
         corners_outside_chart: r.corners_outside_chart,
         mixed_faces: r.mixed_faces,

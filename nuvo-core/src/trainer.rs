@@ -213,19 +213,10 @@ impl Trainer {
         self.config.training.steps
     }
 
-    /// Changes the number of steps the run (and its cosine schedule) spans, before the first step:
-    /// `nuvo unwrap` fits the step count to a time budget after timing a few steps and restoring
-    /// the untrained state. An error once training has begun, since the schedule already ran.
-    pub fn set_total_steps(&mut self, steps: u64) -> Result<(), TrainError> {
-        if self.step != 0 || steps == 0 {
-            return Err(TrainError::Resume(format!(
-                "the step count can only change before training (at step {}), to a positive number (got {steps})",
-                self.step
-            )));
-        }
-        self.config.training.steps = steps;
-        self.schedule.total_steps = steps;
-        Ok(())
+    /// The geometry source, taking the trainer apart: `nuvo unwrap` times a few steps with one
+    /// trainer, then builds the run's trainer on the same source with the step count that fits.
+    pub fn into_source(self) -> Box<dyn GeometrySource> {
+        self.source
     }
 
     /// The learning-rate multiplier left by NaN rollbacks (1 normally).

@@ -210,6 +210,9 @@ pub struct RecipeInput<'a> {
     pub flip_normals: bool,
     pub charts: usize,
     pub steps: u64,
+    /// A safety stop: training ends after this many seconds whatever the step count
+    /// (`training.time_budget_minutes`).
+    pub stop_after_seconds: Option<f64>,
     pub seed: u64,
     /// Density grids only: `[[min], [max]]` of the grid nodes, from a sidecar header.
     pub bounds: Option<[[f32; 3]; 2]>,
@@ -246,12 +249,17 @@ pub fn recipe(r: &RecipeInput) -> String {
     let batch_uv = if clean { 1024 } else { 2048 };
     // The prior fades over 300 steps (the measured bunny setting), or the first 30% of a short run.
     let warm = (r.steps * 3 / 10).clamp(1, 300);
-    let bake = if clean { "round_trip_tolerance = 0.1\nuntangle = true\n" } else { "" };
+    let mut bake = String::from("refine = true\npacking = \"islands\"\n");
+    if clean {
+        bake += "round_trip_tolerance = 0.1\nuntangle = true\n";
+    }
+    let stop =
+        r.stop_after_seconds.map(|s| format!("time_budget_minutes = {}\n", s / 60.0)).unwrap_or_default();
     format!(
         "# Written by `nuvo unwrap`; `nuvo train` on this file reproduces the run.\n\
          seed = {seed}\n\n[geometry]\n{geometry}\n\
          [model]\ncharts = {charts}\ndepth = 4\nwidth = 128\n\n\
-         [training]\nsteps = {steps}\nbatch_3d = 2048\nbatch_uv = {batch_uv}\nchart_support = 1e-3\n\n\
+         [training]\nsteps = {steps}\nbatch_3d = 2048\nbatch_uv = {batch_uv}\nchart_support = 1e-3\n{stop}\n\
          [optimizer]\nlr_mlp = 3e-3\n\n\
          [warm_start]\nsteps = {warm}\nocclusion = true\n\n\
          [losses.cycle_3d]\n[losses.cycle_2d]\n[losses.entropy]\n[losses.surface]\n\
@@ -325,15 +333,16 @@ pub const TIMED_STEPS: u64 = 8;
 /// sample does not belong to); measured on the suite, the whole run averages this fraction of the
 /// timed step cost (BENCHMARKS.md, "nuvo unwrap").
 pub const MEAN_STEP_COST: f64 = 0.8;
-/// Fewest and most steps a fitted run gets: at least the planned 1000 (the recipe's 300-step warm
-/// start is fitted to the planned count, and 1000 steps were measured as the least that gives a
-/// usable atlas of the bunny; BENCHMARKS.md "Atlas quality").
-pub const MIN_STEPS: u64 = 1000;
+/// Fewest and most steps a fitted run gets. The budget wins over quality: fewer than ~1000 steps
+/// cost Editability (BENCHMARKS.md "Atlas quality"), so a slow machine or a large chart count
+/// should get a larger `--time-budget`.
+pub const MIN_STEPS: u64 = 300;
 pub const MAX_STEPS: u64 = 4000;
 
-/// Times [`TIMED_STEPS`] steps of `trainer` (at step 0), puts it back as it was, and sets its step
-/// count to what fits `budget_seconds` (rounded down to a multiple of 50, so timing noise rarely
-/// changes it; within [`MIN_STEPS`]`..=`[`MAX_STEPS`]).
+/// Times [`TIMED_STEPS`] steps of `trainer` (at step 0), puts it back as it was, and returns the
+/// step count that fits `budget_seconds` (rounded down to a multiple of 50, so timing noise rarely
+/// changes it; within [`MIN_STEPS`]`..=`[`MAX_STEPS`]). The caller builds the run's trainer with it,
+/// since the warm start's length follows the step count ([`recipe`]).
 pub fn fit_steps(trainer: &mut Trainer, budget_seconds: f64) -> Result<(u64, Decision), UnwrapError> {
     let start = trainer.checkpoint();
     // One untimed step first: it allocates the tape's buffers.
@@ -344,9 +353,7 @@ pub fn fit_steps(trainer: &mut Trainer, budget_seconds: f64) -> Result<(u64, Dec
     }
     let per_step = t.elapsed().as_secs_f64() / TIMED_STEPS as f64;
     trainer.restore(&start)?;
-    let raw = budget_seconds / (per_step * MEAN_STEP_COST).max(1e-6);
-    let steps = ((raw as u64) / 50 * 50).clamp(MIN_STEPS, MAX_STEPS);
-    trainer.set_total_steps(steps)?;
+    let steps = steps_for(budget_seconds, per_step);
     let why = format!(
         "{:.0} ms per step timed at the start (≈{:.0} ms on average over a run), {budget_seconds:.0} s of \
          training budget",
@@ -354,6 +361,12 @@ pub fn fit_steps(trainer: &mut Trainer, budget_seconds: f64) -> Result<(u64, Dec
         1e3 * per_step * MEAN_STEP_COST
     );
     Ok((steps, Decision::new("steps", steps, why)))
+}
+
+/// The step count for a budget and a timed step (see [`fit_steps`]).
+pub fn steps_for(budget_seconds: f64, seconds_per_timed_step: f64) -> u64 {
+    let raw = budget_seconds / (seconds_per_timed_step * MEAN_STEP_COST).max(1e-6);
+    ((raw.min(1e9) as u64) / 50 * 50).clamp(MIN_STEPS, MAX_STEPS)
 }
 
 /// A density grid's node bounds from the JSON header beside it (`NAME.json` with `bounds_min` and
@@ -444,6 +457,15 @@ mod tests {
     }
 
     #[test]
+    fn steps_fill_the_budget_in_fifties_within_bounds() {
+        // 100 s at 0.099 s per timed step, 0.0792 s on average: 1262 steps, down to 1250.
+        assert_eq!(steps_for(100.0, 0.099), 1250);
+        assert_eq!(steps_for(100.0, 0.0951), 1300);
+        assert_eq!(steps_for(1.0, 0.1), MIN_STEPS);
+        assert_eq!(steps_for(1e6, 1e-9), MAX_STEPS);
+    }
+
+    #[test]
     fn input_kinds_follow_the_extension_and_bad_files_are_named() {
         let dir = tempfile::tempdir().unwrap();
         let write = |name: &str, text: &str| {
@@ -488,12 +510,14 @@ mod tests {
             flip_normals: false,
             charts: 5,
             steps: 900,
+            stop_after_seconds: Some(90.0),
             seed: 3,
             bounds: None,
         };
         let clean = crate::config::from_str("clean", &recipe(&base)).unwrap().config;
         assert_eq!((clean.model.charts, clean.training.steps, clean.seed), (5, 900, 3));
         assert!(clean.output.untangle && clean.output.round_trip_tolerance > 0.0);
+        assert_eq!(clean.training.time_budget_minutes, Some(1.5));
         assert_eq!(clean.warm_start.unwrap().steps, 270);
         let flipped = RecipeInput { flip_normals: true, ..base };
         let c = crate::config::from_str("flipped", &recipe(&flipped)).unwrap().config;
