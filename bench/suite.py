@@ -57,8 +57,10 @@ class Item:
     shares its matching mesh's). prepare: None, or a callable that makes the input (generated
     items) and raises on failure."""
 
-    def __init__(self, group, name, kind, path, xatlas_mesh=None, xatlas_name=None, prepare=None, note=""):
+    def __init__(self, group, name, kind, path, xatlas_mesh=None, xatlas_name=None, prepare=None, note="",
+                 nuvo_args=()):
         self.group, self.name, self.kind, self.path = group, name, kind, path
+        self.nuvo_args = list(nuvo_args)
         self.xatlas_mesh = xatlas_mesh
         self.xatlas_name = xatlas_name or (name if xatlas_mesh else None)
         self.prepare = prepare
@@ -104,8 +106,13 @@ def unruly_items(data):
         items.append(Item("unruly", stem + "_density", "density", p, xatlas_mesh=mesh,
                           xatlas_name=os.path.splitext(os.path.basename(mesh))[0],
                           note=f"xatlas on {os.path.relpath(mesh, data)}"))
+    # A point cloud has no mesh of its own: the atlas is baked onto the bunny mesh it was sampled
+    # from, so it can be measured like the others.
     p = os.path.join(data, "pointclouds", "stanford-bunny_200k.ply")
-    items.append(Item("unruly", "stanford-bunny_200k", "pointcloud", p))
+    bunny = os.path.join(data, "meshes", "stanford-bunny.obj")
+    items.append(Item("unruly", "stanford-bunny_200k", "pointcloud", p,
+                      nuvo_args=["--set", f"output.bake_mesh={bunny}"],
+                      note="baked onto meshes/stanford-bunny.obj"))
     return items
 
 
@@ -305,7 +312,7 @@ def run_nuvo(item, args, out):
     if os.path.isdir(d):
         shutil.rmtree(d)  # a fresh run folder: no half-finished state from an earlier sitting
     os.makedirs(d)
-    cmd = [args.nuvo, "unwrap", item.path, "-o", d] + shlex.split(args.nuvo_args or "")
+    cmd = [args.nuvo, "unwrap", item.path, "-o", d] + item.nuvo_args + shlex.split(args.nuvo_args or "")
     rec = {"tool": "nuvo", "item": item.name, "group": item.group, "input": item.path,
            "command": shlex.join(cmd), "started": now(), "load_before": load_average()}
     stats = {}
