@@ -297,6 +297,15 @@ def load_average():
         return None
 
 
+def binary_built(path):
+    """The modification time of a binary (which build of nuvo ran), None if missing."""
+    try:
+        return datetime.datetime.fromtimestamp(os.stat(path).st_mtime, datetime.timezone.utc).isoformat(
+            timespec="seconds")
+    except OSError:
+        return None
+
+
 def now():
     return datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
 
@@ -314,7 +323,8 @@ def run_nuvo(item, args, out):
     os.makedirs(d)
     cmd = [args.nuvo, "unwrap", item.path, "-o", d] + item.nuvo_args + shlex.split(args.nuvo_args or "")
     rec = {"tool": "nuvo", "item": item.name, "group": item.group, "input": item.path,
-           "command": shlex.join(cmd), "started": now(), "load_before": load_average()}
+           "command": shlex.join(cmd), "started": now(), "load_before": load_average(),
+           "nuvo_built": binary_built(args.nuvo)}
     stats = {}
     rc, wall, reason = run_logged(cmd, os.path.join(d, "unwrap.log"), args.timeout, stats=stats)
     rec.update(returncode=rc, wall_seconds=wall, seconds=wall, **stats)
@@ -362,6 +372,7 @@ def evaluate_xatlas(d, args, rec):
     """`nuvo eval atlas.obj --json` -> eval.json; returns a failure reason or None."""
     cmd = [args.nuvo, "eval", os.path.join(d, "atlas.obj"), "--json"]
     rec["eval_command"] = shlex.join(cmd)
+    rec["nuvo_built"] = binary_built(args.nuvo)
     tmp = os.path.join(d, "eval.json.tmp")
     rc, wall, reason = run_logged(cmd, os.path.join(d, "eval.log"), args.timeout, stdout_path=tmp)
     rec["eval_seconds"] = wall
@@ -413,7 +424,7 @@ COLUMNS = [  # (key, md header, md format)
 CSV_EXTRA = ["input", "note", "reason", "proxy", "charts_source", "uv_charts", "charts_reported_by_xatlas",
              "utilisation", "xatlas_seconds_with_io", "process_wall_seconds", "eval_seconds",
              "eval_views", "eval_resolution", "bake_faces", "bake_flipped_faces", "bake_overlapping_faces",
-             "cpu_seconds", "other_cpu_share", "load_before", "finished"]
+             "cpu_seconds", "other_cpu_share", "load_before", "nuvo_built", "finished"]
 
 
 def _get(d, *keys):
@@ -469,6 +480,7 @@ def nuvo_row(item, rec, out):
         return None
     row["finished"] = rec.get("finished")
     row["load_before"] = rec.get("load_before")
+    row["nuvo_built"] = rec.get("nuvo_built")
     row["cpu_seconds"] = rec.get("cpu_seconds")
     row["other_cpu_share"] = rec.get("other_cpu_share")
     row["process_wall_seconds"] = rec.get("wall_seconds")
@@ -498,6 +510,7 @@ def xatlas_row(item, rec, out):
         return None
     row["finished"] = rec.get("finished")
     row["load_before"] = rec.get("load_before")
+    row["nuvo_built"] = rec.get("nuvo_built")
     row["cpu_seconds"] = rec.get("cpu_seconds")
     row["other_cpu_share"] = rec.get("other_cpu_share")
     row["process_wall_seconds"] = rec.get("wall_seconds")
@@ -628,9 +641,8 @@ def tool_versions(args):
     try:
         v["nuvo"] = subprocess.run([args.nuvo, "--version"], capture_output=True, text=True,
                                    timeout=30).stdout.strip() or "?"
-        st = os.stat(args.nuvo)
-        built = datetime.datetime.fromtimestamp(st.st_mtime, datetime.timezone.utc).isoformat(timespec="seconds")
-        v["nuvo"] += f" ({os.path.relpath(args.nuvo, REPO) if args.nuvo.startswith(REPO) else args.nuvo}, built {built})"
+        shown = os.path.relpath(args.nuvo, REPO) if args.nuvo.startswith(REPO) else args.nuvo
+        v["nuvo"] += f" ({shown}, built {binary_built(args.nuvo)})"
     except (OSError, subprocess.SubprocessError):
         v["nuvo"] = "not found"
     try:
@@ -666,6 +678,15 @@ def write_report(out, rows, meta):
     ]
     lines.append(f"- 1-minute load average: {meta['load_start']} at the start, {load_average()} now "
                  "(each run's, before it started, is `load_before` in `suite.csv`)")
+    builds = sorted({r["nuvo_built"] for r in rows if r.get("nuvo_built")})
+    if len(builds) > 1 or (builds and builds[0] != binary_built(meta["nuvo"])):
+        lines.append("- **the runs used nuvo binaries built at** " + ", ".join(builds)
+                     + " (`nuvo_built` in `suite.csv`)")
+    present = {r["tool"] for r in rows}
+    missing = [f"{i.name} ({tool})" for i in meta["items"] for tool in TOOLS
+               if tool in present and not any(r["item"] == i.name and r["tool"] == tool for r in rows)]
+    if missing:
+        lines.append(f"- not run (yet): {', '.join(missing)}")
     if meta.get("resumed"):
         lines.append(f"- resumed: {meta['resumed']} tool runs taken from earlier sittings (their "
                      "`suite_item.json` has the date)")
@@ -803,7 +824,7 @@ def main(argv=None):
         "command": shlex.join([os.path.relpath(sys.executable) if sys.executable.startswith(REPO) else sys.executable]
                               + sys.argv), "cwd": os.getcwd(),
         "timeout": args.timeout, "nuvo_args": args.nuvo_args, "items": items, "resumed": 0,
-        "load_start": load_average(),
+        "load_start": load_average(), "nuvo": args.nuvo,
     }
     records = {}  # (tool, folder name) -> record
     rows_of = {}  # (item name, tool) -> row
@@ -819,7 +840,12 @@ def main(argv=None):
     def log(msg):
         print(f"[{datetime.datetime.now().strftime('%H:%M:%S')}] {msg}", flush=True)
 
-    interrupted = False
+    interrupted = None
+
+    def on_term(signum, frame):  # a polite kill: stop like Ctrl-C (tool's group killed, tables written)
+        raise KeyboardInterrupt(signum)
+
+    signal.signal(signal.SIGTERM, on_term)
     try:
         for n, item in enumerate(items, 1):
             head = f"{n}/{len(items)} {item.group}/{item.name}"
@@ -866,12 +892,12 @@ def main(argv=None):
                     row["proxy"] = tool == "xatlas" and item.kind == "density"
                     rows_of[(item.name, tool)] = row
             report()
-    except KeyboardInterrupt:
-        interrupted = True
+    except KeyboardInterrupt as e:
+        interrupted = 128 + (e.args[0] if e.args else signal.SIGINT)
         log("interrupted: completed items are kept; run again with --resume to go on")
     report()
     print(f"wrote {os.path.join(out, 'suite.md')} and {os.path.join(out, 'suite.csv')}")
-    return 130 if interrupted else 0
+    return interrupted or 0
 
 
 if __name__ == "__main__":
