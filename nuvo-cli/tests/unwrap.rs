@@ -135,7 +135,7 @@ fn a_new_mesh_unwraps_with_no_config_and_keeps_its_vertices_and_faces() {
     let decided: Vec<&str> =
         report["decisions"].as_array().unwrap().iter().map(|d| d["what"].as_str().unwrap()).collect();
     assert_eq!(decided, ["source", "sampling", "charts", "steps"]);
-    assert_eq!(report["chart_trials"].as_array().unwrap().len(), 7);
+    assert_eq!(report["chart_trials"].as_array().unwrap().len(), 8);
     assert_eq!(report["profile"]["components"], 1);
 }
 
