@@ -85,7 +85,7 @@ use crate::error::AtlasError;
 use crate::metrics::abs_cos_tangents;
 use crate::partuv::partuv_metrics;
 use crate::uvstats::{
-    DEGENERATE_UV_AREA, Orientation, degenerate_3d_faces, orientation, require_uv, uv_charts,
+    DEGENERATE_UV_AREA, Dsu, Orientation, degenerate_3d_faces, orientation, require_uv, uv_charts,
 };
 use crate::vecmath::{cross, dot, norm, sub, v3};
 
@@ -268,28 +268,6 @@ fn area2(p: [[f64; 2]; 3]) -> f64 {
 fn flips(a2: &[f64]) -> usize {
     let ccw = a2.iter().sum::<f64>() >= 0.0;
     a2.iter().filter(|&&a| orientation(a, ccw) == Orientation::Flipped).count()
-}
-
-/// Union–find with path halving over `0..n`.
-struct Dsu(Vec<u32>);
-
-impl Dsu {
-    fn new(n: usize) -> Self {
-        Dsu((0..n as u32).collect())
-    }
-    fn find(&mut self, mut x: u32) -> u32 {
-        while self.0[x as usize] != x {
-            let p = self.0[x as usize];
-            self.0[x as usize] = self.0[p as usize];
-            x = p;
-        }
-        x
-    }
-    fn union(&mut self, a: u32, b: u32) {
-        let (ra, rb) = (self.find(a), self.find(b));
-        let (lo, hi) = (ra.min(rb), ra.max(rb));
-        self.0[hi as usize] = lo;
-    }
 }
 
 /// The bits of a UV value as [`uv_charts`] compares them (`−0 == +0`).

@@ -356,13 +356,14 @@ fn ids(flags: impl Iterator<Item = bool>) -> Vec<u32> {
 }
 
 /// Union–find with path halving; unions keep the smaller root so labels are order-independent.
-struct Dsu(Vec<u32>);
+/// Shared by the UV statistics and the refinement's island splits.
+pub(crate) struct Dsu(Vec<u32>);
 
 impl Dsu {
-    fn new(n: usize) -> Self {
+    pub(crate) fn new(n: usize) -> Self {
         Dsu((0..n as u32).collect())
     }
-    fn find(&mut self, mut x: u32) -> u32 {
+    pub(crate) fn find(&mut self, mut x: u32) -> u32 {
         while self.0[x as usize] != x {
             let p = self.0[x as usize];
             self.0[x as usize] = self.0[p as usize];
@@ -370,7 +371,7 @@ impl Dsu {
         }
         x
     }
-    fn union(&mut self, a: u32, b: u32) {
+    pub(crate) fn union(&mut self, a: u32, b: u32) {
         let (ra, rb) = (self.find(a), self.find(b));
         let (lo, hi) = (ra.min(rb), ra.max(rb));
         self.0[hi as usize] = lo;
