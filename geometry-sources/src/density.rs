@@ -460,3 +460,49 @@ impl GeometrySource for DensitySource {
         )
     }
 }
+
+/// A density grid's node bounds from the JSON header beside it (`NAME.json` with `bounds_min` and
+/// `bounds_max`, as the shared grids have), if there is one: what the `bounds` option should be.
+/// A header that is not JSON or has malformed corners is an error naming it.
+pub fn header_bounds(grid: &Path) -> Result<Option<[[f32; 3]; 2]>, GeometryError> {
+    let header = grid.with_extension("json");
+    let Ok(text) = std::fs::read_to_string(&header) else { return Ok(None) };
+    let bad = |m: &str| GeometryError::malformed(&header, format!("the grid's header {m}"));
+    let json: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| bad(&format!("is not JSON: {e}")))?;
+    let corner = |key: &str| -> Result<Option<[f32; 3]>, GeometryError> {
+        let Some(v) = json.get(key) else { return Ok(None) };
+        let a: Vec<f32> = v
+            .as_array()
+            .filter(|a| a.len() == 3)
+            .and_then(|a| a.iter().map(|x| x.as_f64().map(|x| x as f32)).collect())
+            .ok_or_else(|| bad(&format!("has a `{key}` that is not three numbers")))?;
+        Ok(Some([a[0], a[1], a[2]]))
+    };
+    match (corner("bounds_min")?, corner("bounds_max")?) {
+        (Some(lo), Some(hi)) => Ok(Some([lo, hi])),
+        _ => Ok(None),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn header_bounds_come_from_the_json_beside_the_grid() {
+        let dir = tempfile::tempdir().unwrap();
+        let grid = dir.path().join("g.npy");
+        assert_eq!(header_bounds(&grid).unwrap(), None);
+        let header = dir.path().join("g.json");
+        std::fs::write(&header, r#"{"bounds_min": [-1, -2, -1], "bounds_max": [1, 2, 1.5]}"#).unwrap();
+        assert_eq!(header_bounds(&grid).unwrap(), Some([[-1.0, -2.0, -1.0], [1.0, 2.0, 1.5]]));
+        std::fs::write(&header, r#"{"level": 12}"#).unwrap();
+        assert_eq!(header_bounds(&grid).unwrap(), None);
+        std::fs::write(&header, r#"{"bounds_min": [0, 0], "bounds_max": [1, 1, 1]}"#).unwrap();
+        let e = header_bounds(&grid).unwrap_err().to_string();
+        assert!(e.contains("g.json") && e.contains("`bounds_min`"), "{e}");
+        std::fs::write(&header, "not json").unwrap();
+        assert!(header_bounds(&grid).unwrap_err().to_string().contains("is not JSON"));
+    }
+}

@@ -114,3 +114,37 @@ fn check_no_trailing_data(r: &mut impl BufRead) -> Result<(), String> {
     }
     Ok(())
 }
+
+/// Whether a PLY file's header declares faces (a mesh saved as PLY, of which [`read_ply`] reads
+/// only the vertices). Reads the header only; `false` when there is no readable header.
+pub fn declares_faces(path: &Path) -> bool {
+    let Ok(f) = std::fs::File::open(path) else { return false };
+    for line in BufReader::new(f).split(b'\n').take(200).map_while(Result::ok) {
+        let line = String::from_utf8_lossy(&line);
+        let words: Vec<&str> = line.split_whitespace().collect();
+        if words.first() == Some(&"end_header") {
+            break;
+        }
+        if words.len() == 3 && words[0] == "element" && words[1] == "face" {
+            return words[2].parse::<u64>().is_ok_and(|n| n > 0);
+        }
+    }
+    false
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn faces_are_found_in_the_header() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("m.ply");
+        let header = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n";
+        std::fs::write(&p, format!("{header}element face 1\nend_header\n")).unwrap();
+        assert!(declares_faces(&p));
+        std::fs::write(&p, format!("{header}end_header\n")).unwrap();
+        assert!(!declares_faces(&p));
+        assert!(!declares_faces(&dir.path().join("missing.ply")));
+    }
+}

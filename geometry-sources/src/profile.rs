@@ -190,42 +190,10 @@ fn sphere_of(b: &Aabb) -> (V3, f32) {
 mod tests {
     use super::*;
 
-    /// An axis-aligned box of 12 triangles (outward winding) around `c` with half-side `h`.
-    fn cube(c: [f32; 3], h: f32) -> TriMesh {
-        let p = |x: f32, y: f32, z: f32| [c[0] + x * h, c[1] + y * h, c[2] + z * h];
-        let positions = vec![
-            p(-1., -1., -1.),
-            p(1., -1., -1.),
-            p(1., 1., -1.),
-            p(-1., 1., -1.),
-            p(-1., -1., 1.),
-            p(1., -1., 1.),
-            p(1., 1., 1.),
-            p(-1., 1., 1.),
-        ];
-        let triangles = vec![
-            [0, 2, 1],
-            [0, 3, 2],
-            [4, 5, 6],
-            [4, 6, 7],
-            [0, 1, 5],
-            [0, 5, 4],
-            [2, 3, 7],
-            [2, 7, 6],
-            [1, 2, 6],
-            [1, 6, 5],
-            [0, 4, 7],
-            [0, 7, 3],
-        ];
-        TriMesh { positions, triangles, uv: None }
-    }
+    use crate::testdata::{closed_box, merged};
 
-    fn merge(a: TriMesh, b: TriMesh) -> TriMesh {
-        let off = a.positions.len() as u32;
-        let mut m = a;
-        m.positions.extend(b.positions);
-        m.triangles.extend(b.triangles.iter().map(|t| t.map(|v| v + off)));
-        m
+    fn cube(c: [f32; 3], h: f32) -> TriMesh {
+        closed_box(c, [h; 3])
     }
 
     #[test]
@@ -239,7 +207,7 @@ mod tests {
     #[test]
     fn a_box_inside_a_box_is_hidden_and_its_area_share_is_measured() {
         // Inner half-side 0.5: a quarter of the outer area, so a fifth of the whole is hidden.
-        let m = merge(cube([0.0; 3], 1.0), cube([0.0; 3], 0.5));
+        let m = merged(cube([0.0; 3], 1.0), &cube([0.0; 3], 0.5));
         let p = profile_mesh(&m, 1);
         assert_eq!(p.components, 2);
         assert!((p.largest_component_area - 0.8).abs() < 1e-6, "{p:?}");
@@ -261,7 +229,7 @@ mod tests {
     fn crumbs_count_as_fragments() {
         let mut m = cube([0.0; 3], 1.0);
         for k in 0..5 {
-            m = merge(m, cube([3.0 + k as f32, 0.0, 0.0], 0.01));
+            m = merged(m, &cube([3.0 + k as f32, 0.0, 0.0], 0.01));
         }
         let p = profile_mesh(&m, 2);
         assert_eq!((p.components, p.fragments), (6, 5));

@@ -63,6 +63,47 @@ pub fn sphere_sources() -> SourceRegistry {
     r
 }
 
+/// A closed box of 12 triangles, counter-clockwise seen from outside, centred on `center` with
+/// half-extents `half`: a mesh whose area, visibility and normals every test can work out by hand.
+pub fn closed_box(center: [f32; 3], half: [f32; 3]) -> crate::TriMesh {
+    let p =
+        |x: f32, y: f32, z: f32| [center[0] + x * half[0], center[1] + y * half[1], center[2] + z * half[2]];
+    let positions = vec![
+        p(-1., -1., -1.),
+        p(1., -1., -1.),
+        p(1., 1., -1.),
+        p(-1., 1., -1.),
+        p(-1., -1., 1.),
+        p(1., -1., 1.),
+        p(1., 1., 1.),
+        p(-1., 1., 1.),
+    ];
+    let triangles = vec![
+        [0, 2, 1],
+        [0, 3, 2],
+        [4, 5, 6],
+        [4, 6, 7],
+        [0, 1, 5],
+        [0, 5, 4],
+        [2, 3, 7],
+        [2, 7, 6],
+        [1, 2, 6],
+        [1, 6, 5],
+        [0, 4, 7],
+        [0, 7, 3],
+    ];
+    crate::TriMesh { positions, triangles, uv: None }
+}
+
+/// `a` and `b` as one mesh (`b`'s vertices after `a`'s).
+pub fn merged(a: crate::TriMesh, b: &crate::TriMesh) -> crate::TriMesh {
+    let off = a.positions.len() as u32;
+    let mut m = a;
+    m.positions.extend(&b.positions);
+    m.triangles.extend(b.triangles.iter().map(|t| t.map(|v| v + off)));
+    m
+}
+
 /// `$NUVO_DATA` if set, else `<workspace root>/../shared/data`.
 pub fn data_dir() -> PathBuf {
     match std::env::var_os("NUVO_DATA") {

@@ -10,7 +10,7 @@ use nuvo_core::run::{RunOptions, run};
 use nuvo_core::trainer::build_source;
 use nuvo_core::unwrap::{
     Decision, InputKind, RecipeInput, chart_trials, check_mesh, choose_charts, choose_orientation,
-    choose_sampling, density_bounds, fit_steps, input_kind, ply_has_faces, profile_mesh, recipe,
+    choose_sampling, fit_steps, input_kind, profile_mesh, recipe,
 };
 use nuvo_core::{LoadedConfig, Trainer, config};
 use nuvo_geometry::mesh_source::{MeshOptions, MeshSource, SamplingMode};
@@ -134,7 +134,7 @@ pub fn run_unwrap(args: &UnwrapArgs) -> anyhow::Result<()> {
             (mesh, profile) = (Some(m), Some(p));
         }
         InputKind::PointCloud => {
-            if ply_has_faces(&input) {
+            if nuvo_geometry::ply::declares_faces(&input) {
                 println!(
                     "note: {} declares faces; nuvo unwrap reads a PLY's vertices as a point cloud and writes \
                      per-point UVs (save the mesh as .obj or .glb to get a baked mesh)",
@@ -143,7 +143,7 @@ pub fn run_unwrap(args: &UnwrapArgs) -> anyhow::Result<()> {
             }
         }
         InputKind::Density => {
-            recipe_input.bounds = density_bounds(&input)?;
+            recipe_input.bounds = nuvo_geometry::density::header_bounds(&input)?;
             if let Some([lo, hi]) = recipe_input.bounds {
                 decisions.push(Decision {
                     what: "bounds".into(),
@@ -186,7 +186,7 @@ pub fn run_unwrap(args: &UnwrapArgs) -> anyhow::Result<()> {
         recipe_input.charts = n;
         decisions.push(d);
     }
-    let loaded = resolve(&recipe_input, &args.set, &out)?;
+    let mut loaded = resolve(&recipe_input, &args.set, &out)?;
     for d in &decisions {
         println!("{}: {} ({})", d.what, d.choice, d.why);
     }
@@ -207,11 +207,10 @@ pub fn run_unwrap(args: &UnwrapArgs) -> anyhow::Result<()> {
         decisions.push(d);
         if steps != trainer.total_steps() {
             recipe_input.steps = steps;
-            let loaded = resolve(&recipe_input, &args.set, &out)?;
+            loaded = resolve(&recipe_input, &args.set, &out)?;
             trainer = Trainer::with_source(&loaded, trainer.into_source(), &losses)?;
         }
     }
-    let loaded = resolve(&recipe_input, &args.set, &out)?;
     let planned = started.elapsed().as_secs_f64();
 
     // 5. Train, bake, export, measure.

@@ -73,7 +73,8 @@ pub const POINT_INPUTS: &[&str] = &["ply", "xyz", "txt", "pts"];
 pub const DENSITY_INPUTS: &[&str] = &["npy"];
 
 /// The kind of `path`, from its extension, after checking that it is a readable, non-empty file.
-/// A PLY file is read as points (its faces, if any, are not used; the CLI says so).
+/// A PLY file is read as points (its faces, if any, are not used; the CLI says so, from
+/// `nuvo_geometry::ply::declares_faces`).
 pub fn input_kind(path: &Path) -> Result<InputKind, UnwrapError> {
     let meta =
         std::fs::metadata(path).map_err(|e| input_error(path, format!("cannot read the input: {e}")))?;
@@ -103,24 +104,6 @@ pub fn input_kind(path: &Path) -> Result<InputKind, UnwrapError> {
             ),
         ))
     }
-}
-
-/// Whether a PLY file declares faces (it is then a mesh saved as PLY, of which only the vertices
-/// are read). Reads the header only; `false` when there is no readable header.
-pub fn ply_has_faces(path: &Path) -> bool {
-    use std::io::{BufRead, BufReader};
-    let Ok(f) = std::fs::File::open(path) else { return false };
-    for line in BufReader::new(f).split(b'\n').take(200).map_while(Result::ok) {
-        let line = String::from_utf8_lossy(&line);
-        let words: Vec<&str> = line.split_whitespace().collect();
-        if words.first() == Some(&"end_header") {
-            break;
-        }
-        if words.len() == 3 && words[0] == "element" && words[1] == "face" {
-            return words[2].parse::<u64>().is_ok_and(|n| n > 0);
-        }
-    }
-    false
 }
 
 /// One choice `nuvo unwrap` made, and why: printed, and written to `unwrap.json`.
@@ -371,29 +354,6 @@ pub fn steps_for(budget_seconds: f64, seconds_per_timed_step: f64) -> u64 {
     ((raw.min(1e9) as u64) / 50 * 50).clamp(MIN_STEPS, MAX_STEPS)
 }
 
-/// A density grid's node bounds from the JSON header beside it (`NAME.json` with `bounds_min` and
-/// `bounds_max`, as `../shared/data/density` has), if there is one.
-pub fn density_bounds(grid: &Path) -> Result<Option<[[f32; 3]; 2]>, UnwrapError> {
-    let header = grid.with_extension("json");
-    let Ok(text) = std::fs::read_to_string(&header) else { return Ok(None) };
-    let bad = |m: &str| input_error(&header, format!("the grid's header {m}"));
-    let json: serde_json::Value =
-        serde_json::from_str(&text).map_err(|e| bad(&format!("is not JSON: {e}")))?;
-    let corner = |key: &str| -> Result<Option<[f32; 3]>, UnwrapError> {
-        let Some(v) = json.get(key) else { return Ok(None) };
-        let a: Vec<f32> = v
-            .as_array()
-            .filter(|a| a.len() == 3)
-            .and_then(|a| a.iter().map(|x| x.as_f64().map(|x| x as f32)).collect())
-            .ok_or_else(|| bad(&format!("has a `{key}` that is not three numbers")))?;
-        Ok(Some([a[0], a[1], a[2]]))
-    };
-    match (corner("bounds_min")?, corner("bounds_max")?) {
-        (Some(lo), Some(hi)) => Ok(Some([lo, hi])),
-        _ => Ok(None),
-    }
-}
-
 /// Sanity of a loaded mesh for unwrapping beyond what loading checks: it must have area.
 pub fn check_mesh(path: &Path, mesh: &TriMesh) -> Result<(), UnwrapError> {
     if !mesh.has_area() {
@@ -458,34 +418,8 @@ mod tests {
         assert_eq!(choose_charts(&trials(&[0.5, 0.6, 0.7])).0, 3);
     }
 
-    /// A closed box of 12 outward triangles with half-extents `h`.
-    fn slab(h: [f32; 3]) -> TriMesh {
-        let p = |x: f32, y: f32, z: f32| [x * h[0], y * h[1], z * h[2]];
-        let positions = vec![
-            p(-1., -1., -1.),
-            p(1., -1., -1.),
-            p(1., 1., -1.),
-            p(-1., 1., -1.),
-            p(-1., -1., 1.),
-            p(1., -1., 1.),
-            p(1., 1., 1.),
-            p(-1., 1., 1.),
-        ];
-        let triangles = vec![
-            [0, 2, 1],
-            [0, 3, 2],
-            [4, 5, 6],
-            [4, 6, 7],
-            [0, 1, 5],
-            [0, 5, 4],
-            [2, 3, 7],
-            [2, 7, 6],
-            [1, 2, 6],
-            [1, 6, 5],
-            [0, 4, 7],
-            [0, 7, 3],
-        ];
-        TriMesh { positions, triangles, uv: None }
+    fn slab(half: [f32; 3]) -> TriMesh {
+        nuvo_geometry::testdata::closed_box([0.0; 3], half)
     }
 
     fn trials_on(mesh: TriMesh) -> Vec<ChartTrial> {
@@ -508,10 +442,7 @@ mod tests {
         let outer = slab([1.0, 1.0, 1.0]);
         assert_eq!(choose_sampling(&profile_mesh(&outer, 1)).0, SamplingMode::Uniform);
         // A box inside it: a fifth of the area hidden from every outside direction.
-        let mut nested = outer.clone();
-        let inner = slab([0.5, 0.5, 0.5]);
-        nested.positions.extend(&inner.positions);
-        nested.triangles.extend(inner.triangles.iter().map(|t| t.map(|v| v + 8)));
+        let nested = nuvo_geometry::testdata::merged(outer, &slab([0.5, 0.5, 0.5]));
         let p = profile_mesh(&nested, 1);
         assert!((p.hidden_area - 0.2).abs() < 0.03, "{p:?}");
         assert_eq!(choose_sampling(&p).0, SamplingMode::Visible);
@@ -567,21 +498,6 @@ mod tests {
         assert!(e.contains("b.obj: the file is empty"), "{e}");
         let e = input_kind(&dir.path().join("missing.obj")).unwrap_err().to_string();
         assert!(e.contains("missing.obj: cannot read the input"), "{e}");
-    }
-
-    #[test]
-    fn ply_faces_are_found_in_the_header() {
-        let dir = tempfile::tempdir().unwrap();
-        let p = dir.path().join("m.ply");
-        std::fs::write(
-            &p,
-            "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nelement face 1\nend_header\n",
-        )
-        .unwrap();
-        assert!(ply_has_faces(&p));
-        std::fs::write(&p, "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n")
-            .unwrap();
-        assert!(!ply_has_faces(&p));
     }
 
     #[test]
