@@ -42,10 +42,14 @@ pub fn load_obj(path: &Path) -> Result<TriMesh, GeometryError> {
             ),
         ));
     }
+    // Read once more as text for what tobj does not say: which faces have texture indices, and
+    // the file's own vertex numbering.
+    let bytes = std::fs::read(path).map_err(|e| GeometryError::Io { path: path.to_path_buf(), source: e })?;
+    let text = String::from_utf8_lossy(&bytes);
     if faces_with_uv > 0 {
         // tobj quietly reuses the previous texture index for a corner without one, so a file where
         // only some faces have `vt` indices would come back with made-up UVs: check the text.
-        let (with, without) = count_faces_with_texture_indices(path)?;
+        let (with, without) = count_faces_with_texture_indices(&text);
         if with > 0 && without > 0 {
             return Err(GeometryError::malformed(
                 path,
@@ -57,7 +61,7 @@ pub fn load_obj(path: &Path) -> Result<TriMesh, GeometryError> {
     if mesh.triangles.is_empty() {
         return Err(GeometryError::invalid(path, "the mesh has no faces"));
     }
-    if let Some(numbered) = in_file_order(path, &mesh) {
+    if let Some(numbered) = in_file_order(&text, &mesh) {
         mesh.positions = numbered.positions;
         mesh.triangles = numbered.triangles;
     }
@@ -66,7 +70,7 @@ pub fn load_obj(path: &Path) -> Result<TriMesh, GeometryError> {
 }
 
 /// The mesh's vertices in the file's own order (every `v` line, referenced or not) and its faces
-/// indexing them (no UVs), or `None` when the file's text does not match what `tobj` read.
+/// indexing them (no UVs), or `None` when the file's `text` does not match what `tobj` read.
 ///
 /// `tobj` numbers the vertices of each object in the order the faces first use them, so a user's
 /// vertex `i` would not be ours; a tool that hands UVs back to the user's mesh must keep the file's
@@ -74,8 +78,7 @@ pub fn load_obj(path: &Path) -> Result<TriMesh, GeometryError> {
 /// `tobj`; this pass re-reads only the `v` and `f` lines, fan-triangulates polygons as `tobj` does,
 /// and is used only if every corner lands on the same position as `tobj`'s, so it can never
 /// change the geometry, only its numbering.
-fn in_file_order(path: &Path, mesh: &TriMesh) -> Option<TriMesh> {
-    let text = std::fs::read_to_string(path).ok()?;
+fn in_file_order(text: &str, mesh: &TriMesh) -> Option<TriMesh> {
     let mut positions: Vec<[f32; 3]> = Vec::new();
     let mut triangles: Vec<[u32; 3]> = Vec::with_capacity(mesh.triangles.len());
     for line in text.lines() {
@@ -113,9 +116,7 @@ fn in_file_order(path: &Path, mesh: &TriMesh) -> Option<TriMesh> {
 }
 
 /// Counts `f` lines whose corners all carry a `vt` index, and those with some corner without one.
-fn count_faces_with_texture_indices(path: &Path) -> Result<(usize, usize), GeometryError> {
-    let bytes = std::fs::read(path).map_err(|e| GeometryError::Io { path: path.to_path_buf(), source: e })?;
-    let text = String::from_utf8_lossy(&bytes);
+fn count_faces_with_texture_indices(text: &str) -> (usize, usize) {
     let (mut with, mut without) = (0, 0);
     for line in text.lines() {
         let mut words = line.split_whitespace();
@@ -128,7 +129,7 @@ fn count_faces_with_texture_indices(path: &Path) -> Result<(usize, usize), Geome
             without += 1;
         }
     }
-    Ok((with, without))
+    (with, without)
 }
 
 #[cfg(test)]

@@ -220,7 +220,8 @@ fn bake_and_measure(
     // Writers get the input's own positions when there are any (bit for bit), else map back.
     let (export, export_frame) = match input_positions {
         Some(positions) if positions.len() == baked.mesh.positions.len() => {
-            (TriMesh { positions, ..baked.mesh.clone() }, Similarity::IDENTITY)
+            let m = &baked.mesh;
+            (TriMesh { positions, triangles: m.triangles.clone(), uv: m.uv.clone() }, Similarity::IDENTITY)
         }
         _ => (baked.mesh.clone(), frame),
     };
