@@ -37,6 +37,8 @@ import subprocess
 import sys
 import time
 
+from benchio import read_json, write_json
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
 XATLAS_SCRIPT = os.path.join(HERE, "xatlas_unwrap.py")
@@ -272,22 +274,6 @@ def last_error_line(log_path):
     return lines[-1][:300]
 
 
-def read_json(path):
-    try:
-        with open(path) as fh:
-            return json.load(fh)
-    except (OSError, ValueError):
-        return None
-
-
-def write_json(path, obj):
-    tmp = path + ".tmp"
-    with open(tmp, "w") as fh:
-        json.dump(obj, fh, indent=2)
-        fh.write("\n")
-    os.replace(tmp, path)
-
-
 def load_average():
     """The 1-minute load average (None where the OS has none): timings taken at a load well above
     zero on an otherwise idle benchmark machine were shared with something else."""
@@ -474,16 +460,18 @@ def metrics_row(m):
     }
 
 
+def run_fields(rec):
+    """The columns every tool run's record fills the same way."""
+    return {"finished": rec.get("finished"), "load_before": rec.get("load_before"),
+            "nuvo_built": rec.get("nuvo_built"), "cpu_seconds": rec.get("cpu_seconds"),
+            "other_cpu_share": rec.get("other_cpu_share"), "process_wall_seconds": rec.get("wall_seconds")}
+
+
 def nuvo_row(item, rec, out):
     row = {"group": item.group, "item": item.name, "tool": "nuvo", "input": item.path, "note": ""}
     if rec is None:
         return None
-    row["finished"] = rec.get("finished")
-    row["load_before"] = rec.get("load_before")
-    row["nuvo_built"] = rec.get("nuvo_built")
-    row["cpu_seconds"] = rec.get("cpu_seconds")
-    row["other_cpu_share"] = rec.get("other_cpu_share")
-    row["process_wall_seconds"] = rec.get("wall_seconds")
+    row.update(run_fields(rec))
     if rec.get("status") != "ok":
         row.update(success="no: " + str(rec.get("reason")), reason=rec.get("reason"))
         return row
@@ -508,12 +496,7 @@ def xatlas_row(item, rec, out):
         return row
     if rec is None:
         return None
-    row["finished"] = rec.get("finished")
-    row["load_before"] = rec.get("load_before")
-    row["nuvo_built"] = rec.get("nuvo_built")
-    row["cpu_seconds"] = rec.get("cpu_seconds")
-    row["other_cpu_share"] = rec.get("other_cpu_share")
-    row["process_wall_seconds"] = rec.get("wall_seconds")
+    row.update(run_fields(rec))
     row["xatlas_seconds_with_io"] = rec.get("seconds_with_io")
     row["eval_seconds"] = rec.get("eval_seconds")
     xj = read_json(os.path.join(out, "xatlas", item.xatlas_name, "xatlas.json")) or {}

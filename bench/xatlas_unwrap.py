@@ -29,6 +29,8 @@ import traceback
 import numpy as np
 import xatlas
 
+from benchio import write_json
+
 
 def read_obj(path):
     """The `v` and `f` lines of an OBJ.
@@ -108,14 +110,6 @@ def write_atlas_obj(path, tokens, triangles, vmapping, indices, uvs, header):
         f[:, 0::2] = triangles + 1
         f[:, 1::2] = indices.astype(np.int64) + 1
         fh.write("".join("f %d/%d %d/%d %d/%d\n" % tuple(r) for r in f.tolist()))
-    os.replace(tmp, path)
-
-
-def write_json(path, obj):
-    tmp = path + ".tmp"
-    with open(tmp, "w") as fh:
-        json.dump(obj, fh, indent=2)
-        fh.write("\n")
     os.replace(tmp, path)
 
 
