@@ -15,6 +15,7 @@
 //! | [`uvstats`] | charts, flips, utilisation and overlaps of a UV layout |
 //! | [`partuv`] | the PartUV comparison's charts, seams, angular score, area distortions, packing |
 //! | [`refine`] | local/global ARAP refinement of each UV island from its current UVs, never adding flips |
+//! | [`injective`] | every island made injective (no flip, no self-overlap) and its distortion lowered by SLIM |
 //! | [`untangle`] | turning flipped faces back by moving single UV vertices (the bake's option) |
 //! | [`load`] | choosing the mesh reader by extension |
 //!
@@ -29,6 +30,7 @@ pub mod error;
 pub mod export;
 mod font;
 pub mod gltf_scene;
+pub mod injective;
 pub mod islands;
 pub mod load;
 pub mod metrics;

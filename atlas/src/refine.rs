@@ -164,7 +164,8 @@ pub fn refine_islands(mesh: &TriMesh, opts: &RefineOptions) -> Result<Refined, A
     let ctx = Context { mesh, uv, degenerate: &degenerate, opts };
     let outcomes: Vec<Outcome> = members.par_iter().map(|faces| ctx.island(faces)).collect();
 
-    let (coords, triangles, split_coords) = write_back(uv, &members, &outcomes);
+    let new_corners: Vec<Option<&[[f32; 2]]>> = outcomes.iter().map(|o| o.corners.as_deref()).collect();
+    let (coords, triangles, split_coords) = write_back(uv, &members, &new_corners);
     let out = TriMesh { uv: Some(UvLayer { coords, triangles }), ..mesh.clone() };
     let angular = |m: &TriMesh| -> Result<f64, AtlasError> {
         if m.triangles.is_empty() { Ok(0.0) } else { Ok(partuv_metrics(m)?.angular_score) }
@@ -220,14 +221,14 @@ struct Context<'a> {
 /// A face's isometric 2-D copy (corner 0 at the origin, corner 1 on +x, counter-clockwise) and the
 /// cotangent of the angle at each corner (the weight of the opposite edge).
 #[derive(Clone, Copy)]
-struct Frame {
-    x: [[f64; 2]; 3],
+pub(crate) struct Frame {
+    pub(crate) x: [[f64; 2]; 3],
     cot: [f64; 3],
 }
 
 impl Frame {
     /// The frame of face `f`, `None` when it gets no weight (module docs).
-    fn of(mesh: &TriMesh, f: usize) -> Option<Frame> {
+    pub(crate) fn of(mesh: &TriMesh, f: usize) -> Option<Frame> {
         let [a, b, c] = mesh.corners(f).map(v3);
         let (e1, e2) = (sub(b, a), sub(c, a));
         let l1 = norm(e1);
@@ -259,7 +260,7 @@ impl Frame {
 }
 
 /// Twice the signed area of a 2-D triangle (counter-clockwise positive).
-fn area2(p: [[f64; 2]; 3]) -> f64 {
+pub(crate) fn area2(p: [[f64; 2]; 3]) -> f64 {
     (p[1][0] - p[0][0]) * (p[2][1] - p[0][1]) - (p[1][1] - p[0][1]) * (p[2][0] - p[0][0])
 }
 
@@ -271,7 +272,7 @@ fn flips(a2: &[f64]) -> usize {
 }
 
 /// The bits of a UV value as [`uv_charts`] compares them (`−0 == +0`).
-fn uv_bits(p: [f32; 2]) -> [u32; 2] {
+pub(crate) fn uv_bits(p: [f32; 2]) -> [u32; 2] {
     [(p[0] + 0.0).to_bits(), (p[1] + 0.0).to_bits()]
 }
 
@@ -294,37 +295,7 @@ impl Context<'_> {
         }
         let score_before = self.angular(faces, &original);
 
-        // Unknowns: coords indices, merged when one mesh vertex has the same UV under both.
-        let mut local: HashMap<u32, u32> = HashMap::with_capacity(faces.len());
-        let mut corner_local: Vec<[u32; 3]> = Vec::with_capacity(faces.len());
-        for &f in faces {
-            corner_local.push(uv.triangles[f as usize].map(|ci| {
-                let next = local.len() as u32;
-                *local.entry(ci).or_insert(next)
-            }));
-        }
-        let mut dsu = Dsu::new(local.len());
-        let mut by_vertex: HashMap<(u32, [u32; 2]), u32> = HashMap::with_capacity(local.len());
-        for (&f, cl) in faces.iter().zip(&corner_local) {
-            for (k, &l) in cl.iter().enumerate() {
-                let v = mesh.triangles[f as usize][k];
-                let key = (v, uv_bits(uv.coords[uv.triangles[f as usize][k] as usize]));
-                let first = *by_vertex.entry(key).or_insert(l);
-                dsu.union(first, l);
-            }
-        }
-        let mut unknown_of_root = vec![u32::MAX; local.len()];
-        let mut n = 0u32;
-        let mut unk = |l: u32| {
-            let r = dsu.find(l) as usize;
-            if unknown_of_root[r] == u32::MAX {
-                unknown_of_root[r] = n;
-                n += 1;
-            }
-            unknown_of_root[r]
-        };
-        let corners: Vec<[u32; 3]> = corner_local.iter().map(|cl| cl.map(&mut unk)).collect();
-        let n = n as usize;
+        let (corners, n) = island_unknowns(mesh, uv, faces);
 
         // Working UVs: mirrored to a counter-clockwise majority, centred, scaled to 3-D area.
         let sign = if before_a2.iter().sum::<f64>() >= 0.0 { 1.0 } else { -1.0 };
@@ -415,6 +386,41 @@ impl Context<'_> {
         }
         IslandAngular { value: if n == 0 { 0.0 } else { 1.0 - sum / n as f64 }, degenerate_uv }
     }
+}
+
+/// The unknowns of an island (module docs, "UV vertex"): for each of `faces`, the unknown of each
+/// corner, and how many unknowns there are. Unknowns are numbered in order of first use.
+pub(crate) fn island_unknowns(mesh: &TriMesh, uv: &UvLayer, faces: &[u32]) -> (Vec<[u32; 3]>, usize) {
+    let mut local: HashMap<u32, u32> = HashMap::with_capacity(faces.len());
+    let mut corner_local: Vec<[u32; 3]> = Vec::with_capacity(faces.len());
+    for &f in faces {
+        corner_local.push(uv.triangles[f as usize].map(|ci| {
+            let next = local.len() as u32;
+            *local.entry(ci).or_insert(next)
+        }));
+    }
+    let mut dsu = Dsu::new(local.len());
+    let mut by_vertex: HashMap<(u32, [u32; 2]), u32> = HashMap::with_capacity(local.len());
+    for (&f, cl) in faces.iter().zip(&corner_local) {
+        for (k, &l) in cl.iter().enumerate() {
+            let v = mesh.triangles[f as usize][k];
+            let key = (v, uv_bits(uv.coords[uv.triangles[f as usize][k] as usize]));
+            let first = *by_vertex.entry(key).or_insert(l);
+            dsu.union(first, l);
+        }
+    }
+    let mut unknown_of_root = vec![u32::MAX; local.len()];
+    let mut n = 0u32;
+    let mut unk = |l: u32| {
+        let r = dsu.find(l) as usize;
+        if unknown_of_root[r] == u32::MAX {
+            unknown_of_root[r] = n;
+            n += 1;
+        }
+        unknown_of_root[r]
+    };
+    let corners: Vec<[u32; 3]> = corner_local.iter().map(|cl| cl.map(&mut unk)).collect();
+    (corners, n as usize)
 }
 
 /// [`Context::angular`]'s answer.
@@ -696,27 +702,27 @@ fn place(
 /// The output UV layer (module docs): every island's corner values written to their `coords`
 /// indices, an index shared with an earlier island copied when the values differ. Returns the
 /// coordinates, the UV triangles and how many coordinates were appended.
-fn write_back(
+pub(crate) fn write_back(
     uv: &UvLayer,
     members: &[Vec<u32>],
-    outcomes: &[Outcome],
+    new_corners: &[Option<&[[f32; 2]]>],
 ) -> (Vec<[f32; 2]>, Vec<[u32; 3]>, usize) {
     let mut coords = uv.coords.clone();
     let mut triangles = uv.triangles.clone();
     let mut claimed = vec![false; coords.len()];
     let original = coords.len();
-    let mut copies: HashMap<u32, u32> = HashMap::new();
-    for (faces, outcome) in members.iter().zip(outcomes) {
+    let mut copies: HashMap<(u32, [u32; 2]), u32> = HashMap::new();
+    for (faces, corners) in members.iter().zip(new_corners) {
         copies.clear();
         for (n, &f) in faces.iter().enumerate() {
             for k in 0..3 {
                 let ci = uv.triangles[f as usize][k];
-                let want = outcome.corners.as_ref().map_or(uv.coords[ci as usize], |c| c[3 * n + k]);
+                let want = corners.map_or(uv.coords[ci as usize], |c| c[3 * n + k]);
                 if !claimed[ci as usize] {
                     claimed[ci as usize] = true;
                     coords[ci as usize] = want;
                 } else if uv_bits(coords[ci as usize]) != uv_bits(want) {
-                    let copy = *copies.entry(ci).or_insert_with(|| {
+                    let copy = *copies.entry((ci, uv_bits(want))).or_insert_with(|| {
                         coords.push(want);
                         coords.len() as u32 - 1
                     });

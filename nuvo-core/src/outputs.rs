@@ -27,6 +27,7 @@ use nuvo_atlas::AtlasError;
 use nuvo_atlas::bake::{BakeOptions, BakeReport, ChartFields, RoundTrip, bake};
 use nuvo_atlas::camera::orbit_views;
 use nuvo_atlas::export::{GlbOptions, glb_vertex_map, write_glb, write_obj};
+use nuvo_atlas::injective::{InjectiveOptions, InjectiveReport, make_injective};
 use nuvo_atlas::islands::{IslandPacking, pack_islands};
 use nuvo_atlas::metrics::{EvalOptions, Metrics, evaluate};
 use nuvo_atlas::pack::AtlasLayout;
@@ -106,6 +107,8 @@ pub struct LayoutSummary {
     pub packing: Packing,
     /// The refinement's report, when it ran.
     pub refine: Option<RefineReport>,
+    /// What making every island injective did (after the refinement, when it ran).
+    pub injective: Option<InjectiveReport>,
     /// Islands packed, with `packing = "islands"`.
     pub islands: Option<usize>,
 }
@@ -113,11 +116,16 @@ pub struct LayoutSummary {
 /// Refines and packs the baked layout as `opts` asks (both off: the bake as it is).
 fn finish_layout(mesh: TriMesh, opts: &OutputConfig) -> Result<(TriMesh, LayoutSummary), OutputError> {
     let mut mesh = mesh;
-    let mut summary = LayoutSummary { packing: opts.packing, refine: None, islands: None };
+    let mut summary = LayoutSummary { packing: opts.packing, refine: None, injective: None, islands: None };
     if opts.refine {
         let refined = refine_islands(&mesh, &RefineOptions::default())?;
         mesh = refined.mesh;
         summary.refine = Some(refined.report);
+        // Split parts lie on each other until packed, so only island packing may split.
+        let split = opts.packing == Packing::Islands;
+        let injective = make_injective(&mesh, &InjectiveOptions { split, ..Default::default() })?;
+        mesh = injective.mesh;
+        summary.injective = Some(injective.report);
     }
     if opts.packing == Packing::Islands {
         let packing = IslandPacking { resolution: opts.atlas_resolution, gutter: opts.gutter, rotate: true };

@@ -1,0 +1,2162 @@
+//! Making every UV island injective — no flipped face, no face over another of its island — and
+//! lowering its distortion while keeping it so: the guarantee xatlas gives, on Nuvo's few large
+//! charts (issue 19, part 1).
+//!
+//! Nuvo's networks give no bijectivity guarantee (the paper names it as a limitation) and the ARAP
+//! refinement ([`crate::refine`]) never adds a flip but cannot remove one, nor undo a chart that
+//! wraps round a handle onto itself. [`make_injective`] takes each island and ends with a map that
+//! is injective by construction and by check. Per island (and per part, recursively):
+//!
+//! 1. **Keep** the current map when it passes the injective check (below).
+//! 2. **Repair** it in place (`Patch::repair`): the *bad faces* (not positive, or overlapping
+//!    another positive face of the island) and the faces within 1, 2, 4, then 8 rings of them form
+//!    a region whose inner unknowns (not on the island's boundary) are re-solved as a harmonic map
+//!    (symmetrised mean-value weights) with everything else fixed; the first injective result is
+//!    kept. This mends a fold inside a chart without a new seam.
+//! 3. **Re-embed** the island as a disc: islands with several boundary loops are first cut open
+//!    along shortest edge paths from each loop but the longest to another loop (a genus-0 island
+//!    becomes a disc); the start is the **Tutte embedding** (mean-value weights, symmetrised;
+//!    boundary on a circle by arc length), injective for any positive weights and a strictly
+//!    convex boundary (Floater 2003, "One-to-one piecewise linear mappings over
+//!    triangulations"), then SLIM (step 5). The result is kept when its symmetric Dirichlet energy
+//!    per unit area is at most [`SPLIT_ENERGY`], or when splitting is not allowed or the island
+//!    is one face.
+//! 4. **Split** (`split`): otherwise the bad faces of the current map are **detached**: the good
+//!    faces keep their map and grow back over the bad ones breadth-first (`Patch::grow`: a bad
+//!    face joins when it can be placed, by its rest shape on an edge already placed, as a positive
+//!    triangle over no good face); what stays bad, and each connected piece of the good faces,
+//!    becomes a part that goes back to step 1 with the positions it had. An island with no current
+//!    map to detach from, or whose faces are all bad, is cut into its pieces of consistent winding
+//!    and manifold edges or, when it is one, into two halves grown breadth-first from two far-apart
+//!    faces. A part of one face is always a disc, so the recursion ends. Without `split` an island
+//!    that is neither injective, repairable nor a disc keeps its UVs (counted as not injective).
+//! 5. **SLIM** lowers the distortion without losing injectivity (Rabinovich, Poranne, Panozzo,
+//!    Sorkine-Hornung, "Scalable Locally Injective Mappings", 2017) on the symmetric Dirichlet
+//!    energy `Σ_t A_t (‖J_t‖²_F + ‖J_t⁻¹‖²_F)` (4 per unit area for an isometry, infinite for a
+//!    degenerate face): each round a reweighted local/global step (a 2n × 2n sparse Cholesky solve,
+//!    `faer`) and a flip-avoiding line search (Smith & Schaefer, "Bijective Parameterization with
+//!    Free Boundaries", 2015: at most 0.8 of the first step at which a face's area reaches zero,
+//!    halved until the energy decreases and the map is still injective, at most [`MAX_HALVINGS`]
+//!    times). A free boundary could still run into itself, so every round the free space round the
+//!    island inside a box is triangulated (constrained Delaunay, `spade`) into a **scaffold**
+//!    (Jiang, Schaefer, Panozzo, "Simplicial Complex Augmentation Framework for Bijective Maps",
+//!    2017) whose triangles join the energy (rest shape: their shape at the round's start; total
+//!    weight [`SCAFFOLD_WEIGHT`] of the island's) and the line search: as two parts of the boundary
+//!    approach, the triangles between them are squeezed and push back, so the iteration slides on
+//!    instead of stalling. Where the boundary cannot be triangulated (two boundary vertices at one
+//!    point, a closed slit) the round runs without it. The rounds stop after
+//!    [`InjectiveOptions::iterations`], or when one lowers the energy by less than
+//!    [`InjectiveOptions::tolerance`] (relative).
+//!
+//! Definitions (exact):
+//! - **Island**: a chart of [`crate::uvstats::uv_charts`]; its **unknowns** are those of
+//!   [`crate::refine`] (coordinate indices, merged where one mesh vertex has one UV value), further
+//!   told apart by mesh vertex, and by fan: an unknown whose faces are not all joined across edges
+//!   at it that exactly two faces use in opposite directions gets one unknown per fan, so bowties,
+//!   edges of three or more faces and faces wound against their neighbours become boundary. A face
+//!   of a valid mesh has two corners on one unknown only when it repeats a vertex (a
+//!   **collapsed** face: zero UV area, UV-degenerate, ignored below).
+//! - **Rest shape** of a face: its isometric 2-D copy ([`crate::refine`]'s frame) with weight its
+//!   area; a face degenerate in 3-D ([`crate::uvstats`]) gets an equilateral triangle with the
+//!   island's mean edge length and [`DEGENERATE_WEIGHT`] times that triangle's area as weight, so
+//!   that it stays a well-shaped, positively oriented triangle in UV (where it is measured by
+//!   nothing) instead of a sliver that rounding to `f32` could flip.
+//! - **Disc**: no directed edge used twice, every boundary vertex (an end of an edge used by one
+//!   face) starts exactly one boundary edge, one boundary loop, and `V − E + F = 1`.
+//! - **Injective check** (on `f64` working positions): every face has positive signed area; the
+//!   angles of the faces round every interior vertex sum to 2π (not 4π: a vertex whose fan wraps
+//!   twice); no two boundary segments that share no endpoint cross properly (touching, as the two
+//!   sides of a closed slit do, covers no area twice and is allowed); and exactly one boundary loop
+//!   is counter-clockwise with more than a [`LOOP_AREA_REL`] share of the island's area (the outer
+//!   one). For such a map every point of the plane is covered at most once.
+//! - **Orientation and place**: every island comes out counter-clockwise (a mirrored island of the
+//!   input is mirrored back to a true image of its surface, so no output face is flipped against
+//!   any majority), scaled to the island's input texel density (`sqrt(uv area / 3-D area)`;
+//!   parts keep their island's), centred on the input island's UV centroid. Parts of one island
+//!   lie on top of each other: a packing step ([`crate::islands`]) must follow, as `split` says.
+//!
+//! Islands are processed in parallel (rayon), each sequentially; the result does not depend on the
+//! thread count.
+
+use std::collections::HashMap;
+
+use faer::linalg::solvers::Solve;
+use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
+use faer::sparse::{SparseColMat, Triplet};
+use faer::{Mat, Side};
+use nuvo_geometry::{TriMesh, UvLayer};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::error::AtlasError;
+use crate::refine::{Frame, area2, island_unknowns, write_back};
+use crate::uvstats::{degenerate_3d_faces, require_uv, uv_charts};
+use crate::vecmath::{norm, sub, v3};
+
+/// Weight of a 3-D-degenerate face's equilateral rest shape, relative to its area.
+pub const DEGENERATE_WEIGHT: f64 = 1e-3;
+/// Times a SLIM step is halved, after the flip-avoiding bound, looking for a lower energy and an
+/// injective result before the iteration stops.
+pub const MAX_HALVINGS: usize = 12;
+
+/// Rings of faces round the bad faces that `Patch::repair` tries in turn.
+pub const REPAIR_RINGS: &[usize] = &[1, 2, 4, 8];
+/// The scaffold's box extends this many times the boundary's larger side beyond it.
+pub const SCAFFOLD_MARGIN: f64 = 0.5;
+/// The scaffold's total weight, as a share of the patch's.
+pub const SCAFFOLD_WEIGHT: f64 = 1e-2;
+/// Signed area, relative to the patch's, above which a boundary loop counts as counter-clockwise.
+pub const LOOP_AREA_REL: f64 = 1e-9;
+/// Symmetric Dirichlet energy per unit area above which a re-embedded patch is split in two and
+/// each part solved again (with `split`): the energy of a uniform 1.5× area distortion, or of a
+/// stretch by 1.25 one way and 0.8 the other, is about 4.33.
+pub const SPLIT_ENERGY: f64 = 4.5;
+
+/// Options of [`make_injective`].
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct InjectiveOptions {
+    /// SLIM rounds per island at most (default 30).
+    pub iterations: usize,
+    /// Relative energy decrease below which the rounds stop (default 1e-3).
+    pub tolerance: f64,
+    /// Split islands that are neither injective nor discs (default true; the parts overlap until
+    /// packed).
+    pub split: bool,
+}
+
+impl Default for InjectiveOptions {
+    fn default() -> Self {
+        InjectiveOptions { iterations: 30, tolerance: 1e-3, split: true }
+    }
+}
+
+/// What [`make_injective`] did.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct InjectiveReport {
+    /// UV-connected islands of the input.
+    pub islands_before: usize,
+    /// Islands of the output (parts of split islands counted one by one).
+    pub islands_after: usize,
+    /// Input islands whose map was not injective.
+    pub not_injective_before: usize,
+    /// Output islands whose map is not injective (only possible without `split`).
+    pub not_injective_after: usize,
+    /// Islands (or parts) whose folds were mended in place (`Patch::repair`).
+    pub repaired: usize,
+    /// Islands (or parts) restarted from a Tutte embedding.
+    pub reembedded: usize,
+    /// Input islands split into parts.
+    pub split: usize,
+    /// Input islands that are not topological discs.
+    pub not_disc: usize,
+    /// Symmetric Dirichlet energy per unit 3-D area over all faces with a 3-D area, before and
+    /// after (4 for an isometry; before: only over the islands that were injective, the energy of
+    /// a flipped face being infinite).
+    pub energy_before: f64,
+    /// The same after.
+    pub energy_after: f64,
+    /// SLIM rounds run, over all islands.
+    pub rounds: usize,
+}
+
+/// The injective mesh and what was done to it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Injective {
+    /// The input mesh with new texture coordinates (same positions, triangles and face order).
+    pub mesh: TriMesh,
+    /// The summary.
+    pub report: InjectiveReport,
+}
+
+/// Makes every island of `mesh`'s UV layout injective and lowers its distortion (module docs).
+/// Errors: no UVs, an invalid mesh.
+pub fn make_injective(mesh: &TriMesh, opts: &InjectiveOptions) -> Result<Injective, AtlasError> {
+    let uv = require_uv(mesh)?;
+    let (face_chart, count) = uv_charts(mesh, uv);
+    let mut members: Vec<Vec<u32>> = vec![Vec::new(); count];
+    for (f, &c) in face_chart.iter().enumerate() {
+        members[c as usize].push(f as u32);
+    }
+    let degenerate = degenerate_3d_faces(mesh);
+    let ctx = Ctx { mesh, uv, degenerate: &degenerate, opts };
+    let results: Vec<IslandResult> = members.par_iter().map(|faces| ctx.island(faces)).collect();
+
+    let mut report = InjectiveReport { islands_before: count, ..Default::default() };
+    let (mut parts_faces, mut parts_corners) = (Vec::new(), Vec::new());
+    let (mut e_before, mut a_before, mut e_after, mut a_after) = (0.0, 0.0, 0.0, 0.0);
+    for r in &results {
+        report.not_injective_before += usize::from(!r.injective_before);
+        report.not_disc += usize::from(!r.disc);
+        report.split += usize::from(r.parts.len() > 1);
+        if let Some((e, a)) = r.energy_before {
+            (e_before, a_before) = (e_before + e, a_before + a);
+        }
+        for p in &r.parts {
+            report.reembedded += usize::from(p.start == Start::Tutte);
+            report.repaired += usize::from(p.start == Start::Repaired);
+            report.not_injective_after += usize::from(!p.injective);
+            report.rounds += p.rounds;
+            e_after += p.energy.0;
+            a_after += p.energy.1;
+            parts_faces.push(p.faces.clone());
+            parts_corners.push(p.corners.clone());
+        }
+    }
+    report.islands_after = parts_faces.len();
+    report.energy_before = if a_before > 0.0 { e_before / a_before } else { 0.0 };
+    report.energy_after = if a_after > 0.0 { e_after / a_after } else { 0.0 };
+    let new_corners: Vec<Option<&[[f32; 2]]>> = parts_corners.iter().map(|c| c.as_deref()).collect();
+    let (coords, triangles, _) = write_back(uv, &parts_faces, &new_corners);
+    let out = TriMesh { uv: Some(UvLayer { coords, triangles }), ..mesh.clone() };
+    Ok(Injective { mesh: out, report })
+}
+
+/// The inputs every island reads.
+struct Ctx<'a> {
+    mesh: &'a TriMesh,
+    uv: &'a UvLayer,
+    degenerate: &'a [bool],
+    opts: &'a InjectiveOptions,
+}
+
+/// One input island's outcome.
+struct IslandResult {
+    injective_before: bool,
+    disc: bool,
+    /// `(Σ energy, Σ 3-D area)` of the input map, when it was injective.
+    energy_before: Option<(f64, f64)>,
+    parts: Vec<PartResult>,
+}
+
+/// Where an output island's map started.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Start {
+    /// The input map (injective), or nothing changed.
+    Input,
+    /// The input map with its folds mended in place.
+    Repaired,
+    /// A Tutte embedding.
+    Tutte,
+}
+
+/// One output island: its faces and, when its UVs changed, the new UV of each corner (face-major).
+struct PartResult {
+    faces: Vec<u32>,
+    corners: Option<Vec<[f32; 2]>>,
+    start: Start,
+    injective: bool,
+    rounds: usize,
+    /// `(Σ energy, Σ 3-D area)` of the output map over faces with a 3-D area.
+    energy: (f64, f64),
+}
+
+impl Ctx<'_> {
+    fn island(&self, faces: &[u32]) -> IslandResult {
+        let patch = Patch::new(self, faces);
+        let placement = Placement::of(self, faces, &patch);
+        let start = patch.current(self);
+        let injective_before = start.as_ref().is_some_and(|p| patch.is_injective(p));
+        let energy_before = if injective_before {
+            start.as_ref().and_then(|p| patch.energy(p)).map(|e| (e, patch.area3))
+        } else {
+            None
+        };
+        let disc = patch.topology.disc;
+        let mut parts = Vec::new();
+        self.solve(patch, start, &placement, &mut parts);
+        IslandResult { injective_before, disc, energy_before, parts }
+    }
+
+    /// Steps 1–3 of the module docs for one patch, pushing its output parts.
+    fn solve(
+        &self,
+        patch: Patch,
+        current: Option<Vec<[f64; 2]>>,
+        placement: &Placement,
+        out: &mut Vec<PartResult>,
+    ) {
+        if patch.live().next().is_none() {
+            // Only collapsed faces: zero UV area whatever their UVs, nothing to solve.
+            let energy = (0.0, patch.area3);
+            out.push(PartResult {
+                faces: patch.faces,
+                corners: None,
+                start: Start::Input,
+                injective: true,
+                rounds: 0,
+                energy,
+            });
+            return;
+        }
+        if let Some(p) = &current {
+            if patch.is_injective(p) {
+                return self.finish(patch, p.clone(), Start::Input, out, placement);
+            }
+            if let Some(q) = patch.repair(p) {
+                return self.finish(patch, q, Start::Repaired, out, placement);
+            }
+        }
+        // Re-embed as a disc; kept when its distortion is low, or when nothing else may be done.
+        let mut disc = patch.clone();
+        disc.cut_to_disc();
+        let may_split = self.opts.split && patch.live().count() > 1;
+        if disc.topology.disc
+            && let Some(start) = disc.tutte()
+        {
+            let (q, rounds) = disc.slim(start, self.opts);
+            let density = disc.energy(&q).map_or(f64::INFINITY, |e| e / disc.area3.max(f64::MIN_POSITIVE));
+            if !may_split || density <= SPLIT_ENERGY {
+                return self.push(disc, q, Start::Tutte, rounds, out, placement);
+            }
+        }
+        if !may_split {
+            let energy = (f64::INFINITY, patch.area3);
+            out.push(PartResult {
+                faces: patch.faces,
+                corners: None,
+                start: Start::Input,
+                injective: false,
+                rounds: 0,
+                energy,
+            });
+            return;
+        }
+        if let Some(p) = &current
+            && self.detach(&patch, p, placement, out)
+        {
+            return;
+        }
+        let parts = patch.consistent_parts();
+        let parts = if parts.len() > 1 { parts } else { patch.halves().to_vec() };
+        for part in parts {
+            let sub = Patch::new(self, &part);
+            let current = current.as_ref().map(|p| sub.inherit(&patch, p));
+            self.solve(sub, current, placement, out);
+        }
+    }
+
+    /// SLIM from the injective `p`, then [`Ctx::push`].
+    fn finish(
+        &self,
+        patch: Patch,
+        p: Vec<[f64; 2]>,
+        start: Start,
+        out: &mut Vec<PartResult>,
+        placement: &Placement,
+    ) {
+        let (q, rounds) = patch.slim(p, self.opts);
+        self.push(patch, q, start, rounds, out, placement);
+    }
+
+    /// Records the solved patch `patch` at positions `p`.
+    fn push(
+        &self,
+        patch: Patch,
+        p: Vec<[f64; 2]>,
+        start: Start,
+        rounds: usize,
+        out: &mut Vec<PartResult>,
+        placement: &Placement,
+    ) {
+        let injective = patch.is_injective(&p);
+        let energy = (patch.energy(&p).unwrap_or(f64::INFINITY), patch.area3);
+        let corners = placement.place(&patch, &p);
+        out.push(PartResult { faces: patch.faces, corners, start, injective, rounds, energy });
+    }
+}
+
+impl Ctx<'_> {
+    /// Detaches the faces that make `patch`'s map at `p` not injective: faces of non-positive
+    /// area and positive faces overlapping another positive face (module docs). The rest keeps
+    /// its map; the good and the bad faces each form parts of connected faces, solved anew.
+    /// Returns false (and does nothing) when no face or every face is bad.
+    fn detach(
+        &self,
+        patch: &Patch,
+        p: &[[f64; 2]],
+        placement: &Placement,
+        out: &mut Vec<PartResult>,
+    ) -> bool {
+        let bad = patch.bad_faces(p);
+        let count = bad.iter().filter(|&&b| b).count();
+        let live = patch.live().count();
+        if count == 0 || count >= live {
+            return false;
+        }
+        let (bad, q) = patch.grow(&bad, p);
+        for part in patch.components(&bad) {
+            let sub = Patch::new(self, &part);
+            let current = sub.inherit(patch, &q);
+            self.solve(sub, Some(current), placement, out);
+        }
+        true
+    }
+}
+
+/// Where an island's output goes: its input texel density, centroid and orientation.
+struct Placement {
+    /// UV length per 3-D length.
+    density: f64,
+    centre: [f64; 2],
+}
+
+impl Placement {
+    fn of(ctx: &Ctx, faces: &[u32], patch: &Patch) -> Placement {
+        let (mut auv, mut c) = (0.0, [0.0f64; 2]);
+        let mut mean = [0.0f64; 2];
+        for &f in faces {
+            let t = ctx.uv.triangles[f as usize].map(|i| ctx.uv.coords[i as usize].map(|x| x as f64));
+            let a = 0.5 * area2(t).abs();
+            auv += a;
+            for q in t {
+                c = [c[0] + a * q[0] / 3.0, c[1] + a * q[1] / 3.0];
+                mean = [mean[0] + q[0] / (3 * faces.len()) as f64, mean[1] + q[1] / (3 * faces.len()) as f64];
+            }
+        }
+        let centre = if auv > 0.0 { [c[0] / auv, c[1] / auv] } else { mean };
+        let density = if auv > 0.0 && patch.area3 > 0.0 { (auv / patch.area3).sqrt() } else { 1.0 };
+        Placement { density, centre }
+    }
+
+    /// The patch's corners at working positions `p`, scaled and centred (module docs), in `f32`;
+    /// `None` when not finite.
+    fn place(&self, patch: &Patch, p: &[[f64; 2]]) -> Option<Vec<[f32; 2]>> {
+        let (mut w, mut c) = (0.0, [0.0f64; 2]);
+        for t in &patch.corners {
+            let q = t.map(|i| p[i as usize]);
+            let a = area2(q).abs();
+            w += a;
+            for v in q {
+                c = [c[0] + a * v[0] / 3.0, c[1] + a * v[1] / 3.0];
+            }
+        }
+        let c = if w > 0.0 { [c[0] / w, c[1] / w] } else { [0.0, 0.0] };
+        let s = self.density;
+        let out: Vec<[f32; 2]> = patch
+            .corners
+            .iter()
+            .flat_map(|t| t.map(|i| p[i as usize]))
+            .map(|q| {
+                [(self.centre[0] + s * (q[0] - c[0])) as f32, (self.centre[1] + s * (q[1] - c[1])) as f32]
+            })
+            .collect();
+        out.iter().flatten().all(|x| x.is_finite()).then_some(out)
+    }
+}
+
+/// A face's rest shape: the gradient operator of its map (`J = Σ_k q_k ⊗ g_k`) and its weight.
+#[derive(Clone, Copy)]
+struct Rest {
+    /// Per corner, the gradient of its hat function in the rest frame.
+    g: [[f64; 2]; 3],
+    /// Weight (rest area, or the degenerate fraction of it).
+    weight: f64,
+    /// Rest corner positions (for the mean-value weights and boundary lengths).
+    x: [[f64; 2]; 3],
+    /// Whether the face has a true 3-D area (counted in the energy report).
+    real: bool,
+}
+
+impl Rest {
+    fn new(x: [[f64; 2]; 3], weight: f64, real: bool) -> Rest {
+        let d1 = [x[1][0] - x[0][0], x[1][1] - x[0][1]];
+        let d2 = [x[2][0] - x[0][0], x[2][1] - x[0][1]];
+        let det = d1[0] * d2[1] - d1[1] * d2[0];
+        // X = [d1 d2] (columns); rows of X⁻¹ are the gradients of corners 1 and 2.
+        let g1 = [d2[1] / det, -d2[0] / det];
+        let g2 = [-d1[1] / det, d1[0] / det];
+        let g0 = [-g1[0] - g2[0], -g1[1] - g2[1]];
+        Rest { g: [g0, g1, g2], weight, x, real }
+    }
+
+    /// The Jacobian `[[∂u/∂x, ∂u/∂y], [∂v/∂x, ∂v/∂y]]` of the map to UV triangle `q`.
+    fn jacobian(&self, q: [[f64; 2]; 3]) -> [[f64; 2]; 2] {
+        let mut j = [[0.0; 2]; 2];
+        for (qk, gk) in q.iter().zip(&self.g) {
+            for r in 0..2 {
+                for c in 0..2 {
+                    j[r][c] += qk[r] * gk[c];
+                }
+            }
+        }
+        j
+    }
+}
+
+/// `x > 0`, false for NaN: the test every area and determinant must pass.
+fn is_positive(x: f64) -> bool {
+    x > 0.0
+}
+
+/// The symmetric Dirichlet energy density `‖J‖² + ‖J⁻¹‖²` (infinite unless `det J > 0`).
+fn sym_dirichlet(j: [[f64; 2]; 2]) -> f64 {
+    let det = j[0][0] * j[1][1] - j[0][1] * j[1][0];
+    if !is_positive(det) {
+        return f64::INFINITY;
+    }
+    let f = j[0][0] * j[0][0] + j[0][1] * j[0][1] + j[1][0] * j[1][0] + j[1][1] * j[1][1];
+    f + f / (det * det)
+}
+
+/// The signed SVD `J = rot(φ) diag(s1, s2) rot(θ)` of a 2×2 matrix (`s1 ≥ |s2|`, `s2 < 0` iff
+/// `det J < 0`), as `(φ, s1, s2, θ)`.
+fn svd2(j: [[f64; 2]; 2]) -> (f64, f64, f64, f64) {
+    let [[a, b], [c, d]] = j;
+    let (e, f, g, h) = ((a + d) / 2.0, (a - d) / 2.0, (c + b) / 2.0, (c - b) / 2.0);
+    let (q, r) = (e.hypot(h), f.hypot(g));
+    let (a1, a2) = (g.atan2(f), h.atan2(e));
+    ((a2 + a1) / 2.0, q + r, q - r, (a2 - a1) / 2.0)
+}
+
+fn rot(angle: f64) -> [[f64; 2]; 2] {
+    let (s, c) = angle.sin_cos();
+    [[c, -s], [s, c]]
+}
+
+fn mul(a: [[f64; 2]; 2], b: [[f64; 2]; 2]) -> [[f64; 2]; 2] {
+    let mut m = [[0.0; 2]; 2];
+    for r in 0..2 {
+        for c in 0..2 {
+            m[r][c] = a[r][0] * b[0][c] + a[r][1] * b[1][c];
+        }
+    }
+    m
+}
+
+/// The combinatorics of a patch.
+#[derive(Clone, Debug, Default)]
+struct Topology {
+    disc: bool,
+    /// Boundary loops, each a cycle of unknowns in the direction of its faces' edges; empty when
+    /// the boundary is not a set of simple cycles (a boundary vertex starting two boundary edges).
+    loops: Vec<Vec<u32>>,
+    /// Whether the boundary could be followed (every boundary vertex starts one boundary edge and
+    /// no directed edge is used twice).
+    manifold: bool,
+    /// Whether each unknown is on a boundary loop.
+    on_boundary: Vec<bool>,
+}
+
+/// One island, or one part of it, as the solver sees it.
+#[derive(Clone)]
+struct Patch {
+    /// Mesh faces (global ids) in island order.
+    faces: Vec<u32>,
+    /// Unknown of each corner of each face.
+    corners: Vec<[u32; 3]>,
+    /// Rest shape of each face.
+    rest: Vec<Rest>,
+    /// Faces with two corners on one unknown (module docs): ignored by the solver.
+    collapsed: Vec<bool>,
+    n: usize,
+    /// Σ 3-D area of the faces with one.
+    area3: f64,
+    topology: Topology,
+}
+
+impl Patch {
+    fn new(ctx: &Ctx, faces: &[u32]) -> Patch {
+        let (merged, _) = island_unknowns(ctx.mesh, ctx.uv, faces);
+        // Tell unknowns apart by mesh vertex too (module docs).
+        let mut ids: HashMap<(u32, u32), u32> = HashMap::with_capacity(faces.len());
+        let corners: Vec<[u32; 3]> = faces
+            .iter()
+            .zip(&merged)
+            .map(|(&f, m)| {
+                let v = ctx.mesh.triangles[f as usize];
+                [0, 1, 2].map(|k| {
+                    let next = ids.len() as u32;
+                    *ids.entry((m[k], v[k])).or_insert(next)
+                })
+            })
+            .collect();
+        let collapsed: Vec<bool> =
+            corners.iter().map(|c| c[0] == c[1] || c[1] == c[2] || c[0] == c[2]).collect();
+        let (corners, n) = separate_fans(corners, &collapsed, ids.len(), &Default::default());
+        let frames: Vec<Option<Frame>> = faces
+            .iter()
+            .map(|&f| if ctx.degenerate[f as usize] { None } else { Frame::of(ctx.mesh, f as usize) })
+            .collect();
+        let (mut len, mut edges) = (0.0, 0usize);
+        for &f in faces {
+            let p = ctx.mesh.corners(f as usize).map(v3);
+            for k in 0..3 {
+                let l = norm(sub(p[(k + 1) % 3], p[k]));
+                if l.is_finite() {
+                    len += l;
+                    edges += 1;
+                }
+            }
+        }
+        let mean = if edges > 0 && len > 0.0 { len / edges as f64 } else { 1.0 };
+        let equilateral = [[0.0, 0.0], [mean, 0.0], [0.5 * mean, 0.5 * 3f64.sqrt() * mean]];
+        let mut area3 = 0.0;
+        let rest: Vec<Rest> = frames
+            .iter()
+            .map(|fr| match fr {
+                Some(fr) => {
+                    let a = 0.5 * area2(fr.x);
+                    area3 += a;
+                    Rest::new(fr.x, a, true)
+                }
+                None => Rest::new(equilateral, DEGENERATE_WEIGHT * 0.5 * area2(equilateral), false),
+            })
+            .collect();
+        let mut patch = Patch {
+            faces: faces.to_vec(),
+            corners,
+            rest,
+            collapsed,
+            n,
+            area3,
+            topology: Topology::default(),
+        };
+        patch.topology = patch.topology();
+        patch
+    }
+
+    /// The live faces: `(index, corners)` of the faces that are not collapsed.
+    fn live(&self) -> impl Iterator<Item = (usize, [u32; 3])> + '_ {
+        self.corners.iter().enumerate().filter(|(t, _)| !self.collapsed[*t]).map(|(t, &c)| (t, c))
+    }
+
+    fn topology(&self) -> Topology {
+        let mut directed: HashMap<(u32, u32), u32> = HashMap::with_capacity(3 * self.corners.len());
+        let mut manifold = true;
+        let mut faces = 0usize;
+        for (_, c) in self.live() {
+            faces += 1;
+            for k in 0..3 {
+                let e = (c[k], c[(k + 1) % 3]);
+                *directed.entry(e).or_insert(0) += 1;
+            }
+        }
+        let mut next = vec![u32::MAX; self.n];
+        let mut used = vec![false; self.n];
+        let mut undirected = 0usize;
+        // Deterministic order: walk faces, not the map.
+        for (_, c) in self.live() {
+            for k in 0..3 {
+                let (a, b) = (c[k], c[(k + 1) % 3]);
+                used[a as usize] = true;
+                if directed[&(a, b)] > 1 {
+                    manifold = false;
+                }
+                match directed.get(&(b, a)) {
+                    Some(_) => {
+                        if a < b {
+                            undirected += 1;
+                        }
+                    }
+                    None => {
+                        undirected += 1;
+                        if next[a as usize] != u32::MAX {
+                            manifold = false;
+                        }
+                        next[a as usize] = b;
+                    }
+                }
+            }
+        }
+        let mut loops = Vec::new();
+        let mut on_boundary = vec![false; self.n];
+        if manifold {
+            let mut seen = vec![false; self.n];
+            for s in 0..self.n {
+                if next[s] == u32::MAX || seen[s] {
+                    continue;
+                }
+                let mut cycle = Vec::new();
+                let mut v = s as u32;
+                while !seen[v as usize] {
+                    seen[v as usize] = true;
+                    on_boundary[v as usize] = true;
+                    cycle.push(v);
+                    v = next[v as usize];
+                    if v == u32::MAX {
+                        manifold = false;
+                        break;
+                    }
+                }
+                if v as usize != s {
+                    manifold = false;
+                }
+                loops.push(cycle);
+            }
+        }
+        let vertices = used.iter().filter(|&&u| u).count() as i64;
+        let euler = vertices - undirected as i64 + faces as i64;
+        let disc = manifold && loops.len() == 1 && euler == 1;
+        if !manifold {
+            loops.clear();
+        }
+        Topology { disc, loops, manifold, on_boundary }
+    }
+
+    /// The island's current UVs as working positions (scaled to 3-D area, mirrored to a
+    /// counter-clockwise majority), `None` when they have no area.
+    fn current(&self, ctx: &Ctx) -> Option<Vec<[f64; 2]>> {
+        let mut p = vec![[0.0f64; 2]; self.n];
+        let mut signed = 0.0;
+        for (&f, c) in self.faces.iter().zip(&self.corners) {
+            let t = ctx.uv.triangles[f as usize].map(|i| ctx.uv.coords[i as usize].map(|x| x as f64));
+            signed += area2(t);
+            for k in 0..3 {
+                p[c[k] as usize] = t[k];
+            }
+        }
+        let sign = if signed >= 0.0 { 1.0 } else { -1.0 };
+        let auv: f64 = self.live().map(|(_, c)| 0.5 * area2(c.map(|i| p[i as usize])).abs()).sum();
+        let total: f64 = self.live().map(|(t, _)| self.rest[t].weight).sum();
+        if !(auv > 0.0 && total > 0.0) {
+            return None;
+        }
+        let s = (total / auv).sqrt();
+        Some(p.iter().map(|q| [s * q[0], s * sign * q[1]]).collect())
+    }
+
+    /// The injective check of the module docs.
+    fn is_injective(&self, p: &[[f64; 2]]) -> bool {
+        if !self.topology.manifold || p.iter().flatten().any(|x| !x.is_finite()) {
+            return false;
+        }
+        let mut angle = vec![0.0f64; self.n];
+        for (_, c) in self.live() {
+            let q = c.map(|i| p[i as usize]);
+            if !is_positive(area2(q)) {
+                return false;
+            }
+            for k in 0..3 {
+                let (a, b, o) = (q[(k + 1) % 3], q[(k + 2) % 3], q[k]);
+                let (u, v) = ([a[0] - o[0], a[1] - o[1]], [b[0] - o[0], b[1] - o[1]]);
+                angle[c[k] as usize] += (u[0] * v[1] - u[1] * v[0]).atan2(u[0] * v[0] + u[1] * v[1]);
+            }
+        }
+        let tau = std::f64::consts::TAU;
+        if (0..self.n)
+            .any(|v| !self.topology.on_boundary[v] && angle[v] > 0.0 && (angle[v] - tau).abs() > 0.5 * tau)
+        {
+            return false;
+        }
+        // A loop of (nearly) no area, a closed slit, encloses nothing either way.
+        let total: f64 = self.live().map(|(_, c)| area2(c.map(|i| p[i as usize]))).sum();
+        let ccw = self
+            .topology
+            .loops
+            .iter()
+            .filter(|l| {
+                let mut s = 0.0;
+                for (i, &a) in l.iter().enumerate() {
+                    let (pa, pb) = (p[a as usize], p[l[(i + 1) % l.len()] as usize]);
+                    s += pa[0] * pb[1] - pa[1] * pb[0];
+                }
+                s > LOOP_AREA_REL * total
+            })
+            .count();
+        (self.topology.loops.is_empty() || ccw == 1) && !boundary_crosses(&self.topology.loops, p)
+    }
+
+    /// Σ weight × symmetric Dirichlet over live faces; `None` when some face is not positive.
+    fn energy(&self, p: &[[f64; 2]]) -> Option<f64> {
+        self.energy_of(p, false)
+    }
+
+    fn energy_of(&self, p: &[[f64; 2]], all: bool) -> Option<f64> {
+        let mut e = 0.0;
+        for (t, c) in self.live() {
+            let d = sym_dirichlet(self.rest[t].jacobian(c.map(|i| p[i as usize])));
+            if !d.is_finite() {
+                return None;
+            }
+            if all || self.rest[t].real {
+                e += self.rest[t].weight * d;
+            }
+        }
+        Some(e)
+    }
+
+    /// The Tutte embedding (module docs); `None` for a patch that is not a disc or whose system
+    /// cannot be factored.
+    fn tutte(&self) -> Option<Vec<[f64; 2]>> {
+        let boundary = self.topology.loops.first().filter(|_| self.topology.disc)?;
+        // Boundary on a circle of the patch's rest area, by rest arc length.
+        let mut lengths: HashMap<(u32, u32), f64> = HashMap::new();
+        for (t, c) in self.live() {
+            for k in 0..3 {
+                let (a, b) = (self.rest[t].x[k], self.rest[t].x[(k + 1) % 3]);
+                lengths.insert((c[k], c[(k + 1) % 3]), (b[0] - a[0]).hypot(b[1] - a[1]));
+            }
+        }
+        let arcs: Vec<f64> = (0..boundary.len())
+            .map(|i| lengths[&(boundary[i], boundary[(i + 1) % boundary.len()])].max(f64::MIN_POSITIVE))
+            .collect();
+        let perimeter: f64 = arcs.iter().sum();
+        let total: f64 = self.live().map(|(t, _)| self.rest[t].weight).sum();
+        let radius = (total.max(f64::MIN_POSITIVE) / std::f64::consts::PI).sqrt();
+        let mut p = vec![[0.0f64; 2]; self.n];
+        let mut s = 0.0;
+        for (i, &v) in boundary.iter().enumerate() {
+            let a = std::f64::consts::TAU * s / perimeter;
+            p[v as usize] = [radius * a.cos(), radius * a.sin()];
+            s += arcs[i];
+        }
+        let free: Vec<bool> = self.topology.on_boundary.iter().map(|&b| !b).collect();
+        self.harmonic(p, &free)
+    }
+
+    /// `p` with the `free` unknowns moved to solve `Σ_j W_ij (p_i − p_j) = 0`, `W` the
+    /// symmetrised mean-value weights of the rest shapes (positive, so each free unknown lands
+    /// in the convex hull of its neighbours); `None` when the system cannot be solved.
+    fn harmonic(&self, mut p: Vec<[f64; 2]>, free: &[bool]) -> Option<Vec<[f64; 2]>> {
+        let mut row = vec![u32::MAX; self.n];
+        let mut interior = Vec::new();
+        for (v, r) in row.iter_mut().enumerate() {
+            if free[v] {
+                *r = interior.len() as u32;
+                interior.push(v as u32);
+            }
+        }
+        if interior.is_empty() {
+            return Some(p);
+        }
+        let m = interior.len();
+        let mut triplets = Vec::new();
+        let mut rhs = Mat::<f64>::zeros(m, 2);
+        for (t, c) in self.live() {
+            if c.iter().all(|&v| !free[v as usize]) {
+                continue;
+            }
+            let x = self.rest[t].x;
+            for k in 0..3 {
+                let (o, a, b) = (x[k], x[(k + 1) % 3], x[(k + 2) % 3]);
+                let (u, v) = ([a[0] - o[0], a[1] - o[1]], [b[0] - o[0], b[1] - o[1]]);
+                let theta = (u[0] * v[1] - u[1] * v[0]).atan2(u[0] * v[0] + u[1] * v[1]);
+                let half = (0.5 * theta).tan();
+                for (other, len) in [(c[(k + 1) % 3], u[0].hypot(u[1])), (c[(k + 2) % 3], v[0].hypot(v[1]))] {
+                    let w = half / len;
+                    let (i, j) = (c[k], other);
+                    // w is i's weight for j; added symmetrically, so W_ij = w_ij + w_ji.
+                    let (ri, rj) = (row[i as usize], row[j as usize]);
+                    for (ra, pb, rb) in [(ri, p[j as usize], rj), (rj, p[i as usize], ri)] {
+                        if ra == u32::MAX {
+                            continue;
+                        }
+                        triplets.push(Triplet::new(ra as usize, ra as usize, w));
+                        if rb == u32::MAX {
+                            rhs[(ra as usize, 0)] += w * pb[0];
+                            rhs[(ra as usize, 1)] += w * pb[1];
+                        } else if rb < ra {
+                            triplets.push(Triplet::new(ra as usize, rb as usize, -w));
+                        }
+                    }
+                }
+            }
+        }
+        if triplets.iter().any(|t| !t.val.is_finite()) {
+            return None;
+        }
+        let k = SparseColMat::<usize, f64>::try_new_from_triplets(m, m, &triplets).ok()?;
+        let llt = k.sp_cholesky(Side::Lower).ok()?;
+        llt.solve_in_place(rhs.as_mut());
+        for (r, &v) in interior.iter().enumerate() {
+            p[v as usize] = [rhs[(r, 0)], rhs[(r, 1)]];
+        }
+        p.iter().flatten().all(|x| x.is_finite()).then_some(p)
+    }
+
+    /// A local repair of the non-injective map `p` (module docs): the unknowns inside a region
+    /// round the bad faces ([`Patch::bad_faces`]), grown by [`REPAIR_RINGS`] rings of faces in
+    /// turn, are re-solved as a harmonic map with everything else fixed; the first injective
+    /// result is returned. `None` when no region works (a fold on the boundary, an overlap of
+    /// two distant parts).
+    fn repair(&self, p: &[[f64; 2]]) -> Option<Vec<[f64; 2]>> {
+        let mut region = self.bad_faces(p);
+        if !region.iter().any(|&b| b) {
+            return None;
+        }
+        let mut faces_of: Vec<Vec<u32>> = vec![Vec::new(); self.n];
+        for (t, c) in self.live() {
+            for &v in &c {
+                faces_of[v as usize].push(t as u32);
+            }
+        }
+        let mut grown = 0;
+        for &rings in REPAIR_RINGS {
+            while grown < rings {
+                let touched: Vec<bool> =
+                    (0..self.n).map(|v| faces_of[v].iter().any(|&t| region[t as usize])).collect();
+                for (t, c) in self.live() {
+                    if c.iter().any(|&v| touched[v as usize]) {
+                        region[t] = true;
+                    }
+                }
+                grown += 1;
+            }
+            let free: Vec<bool> = (0..self.n)
+                .map(|v| {
+                    !self.topology.on_boundary[v]
+                        && !faces_of[v].is_empty()
+                        && faces_of[v].iter().all(|&t| region[t as usize])
+                })
+                .collect();
+            if !free.iter().any(|&f| f) {
+                continue;
+            }
+            if let Some(q) = self.harmonic(p.to_vec(), &free)
+                && self.is_injective(&q)
+            {
+                return Some(q);
+            }
+        }
+        None
+    }
+
+    /// SLIM rounds from the injective `p` (module docs); returns the last injective positions and
+    /// the rounds taken.
+    fn slim(&self, mut p: Vec<[f64; 2]>, opts: &InjectiveOptions) -> (Vec<[f64; 2]>, usize) {
+        let Some(mut energy) = self.energy_of(&p, true) else { return (p, 0) };
+        let Some(mut system) = SlimSystem::new(self) else { return (p, 0) };
+        let mut rounds = 0;
+        for _ in 0..opts.iterations {
+            let scaffold = Scaffold::build(self, &p);
+            let target = match &scaffold {
+                Some(sc) => system.global_scaffold(self, &p, sc),
+                None => system.global(self, &p),
+            };
+            let Some(target) = target else { break };
+            rounds += 1;
+            let d: Vec<[f64; 2]> = target.iter().zip(&p).map(|(a, b)| [a[0] - b[0], a[1] - b[1]]).collect();
+            let bound = match &scaffold {
+                Some(sc) => self.max_step(&p, &d).min(sc.max_step(&p, &d)),
+                None => self.max_step(&p, &d),
+            };
+            let total = |q: &[[f64; 2]]| -> Option<f64> {
+                let e = self.energy_of(q, true)?;
+                match &scaffold {
+                    Some(sc) => Some(e + sc.energy(q)?),
+                    None => Some(e),
+                }
+            };
+            let Some(now) = total(&p) else { break };
+            let mut t = (0.8 * bound).min(1.0);
+            let mut accepted = None;
+            for _ in 0..=MAX_HALVINGS {
+                let q: Vec<[f64; 2]> =
+                    p.iter().zip(&d).map(|(a, b)| [a[0] + t * b[0], a[1] + t * b[1]]).collect();
+                if let Some(e) = total(&q)
+                    && e < now
+                    && self.is_injective(&q)
+                {
+                    accepted = Some(q);
+                    break;
+                }
+                t *= 0.5;
+            }
+            let Some(q) = accepted else { break };
+            let Some(e) = self.energy_of(&q, true) else { break };
+            let decrease = (energy - e) / energy;
+            (p, energy) = (q, e);
+            if decrease < opts.tolerance {
+                break;
+            }
+        }
+        (p, rounds)
+    }
+
+    /// The first `t > 0` at which some live face's signed area along `p + t d` reaches zero
+    /// (infinity when none does).
+    fn max_step(&self, p: &[[f64; 2]], d: &[[f64; 2]]) -> f64 {
+        self.live()
+            .map(|(_, c)| triangle_zero_step(c.map(|i| p[i as usize]), c.map(|i| d[i as usize])))
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    /// Cuts a patch with several boundary loops along shortest paths (by rest edge length) from
+    /// each loop but the longest to another loop, until one loop is left (module docs); a patch
+    /// of genus 0 becomes a disc. Does nothing to a patch whose boundary cannot be followed.
+    fn cut_to_disc(&mut self) {
+        for _ in 0..self.topology.loops.len() {
+            if !self.topology.manifold || self.topology.loops.len() < 2 {
+                return;
+            }
+            let mut length: HashMap<(u32, u32), f64> = HashMap::new();
+            let mut adj: Vec<Vec<(u32, f64)>> = vec![Vec::new(); self.n];
+            for (t, c) in self.live() {
+                for k in 0..3 {
+                    let (a, b) = (c[k], c[(k + 1) % 3]);
+                    let (xa, xb) = (self.rest[t].x[k], self.rest[t].x[(k + 1) % 3]);
+                    let l = (xb[0] - xa[0]).hypot(xb[1] - xa[1]);
+                    if length.insert((a.min(b), a.max(b)), l).is_none() {
+                        adj[a as usize].push((b, l));
+                        adj[b as usize].push((a, l));
+                    }
+                }
+            }
+            let loop_length = |l: &Vec<u32>| -> f64 {
+                (0..l.len())
+                    .map(|i| length[&(l[i].min(l[(i + 1) % l.len()]), l[i].max(l[(i + 1) % l.len()]))])
+                    .sum()
+            };
+            let outer = (0..self.topology.loops.len())
+                .max_by(|&a, &b| {
+                    loop_length(&self.topology.loops[a])
+                        .total_cmp(&loop_length(&self.topology.loops[b]))
+                        .then(b.cmp(&a))
+                })
+                .unwrap_or(0);
+            let hole = if outer == 0 { 1 } else { 0 };
+            let mut loop_of = vec![usize::MAX; self.n];
+            for (li, l) in self.topology.loops.iter().enumerate() {
+                for &v in l {
+                    loop_of[v as usize] = li;
+                }
+            }
+            // Dijkstra from the hole to the nearest vertex of another loop.
+            let mut dist = vec![f64::INFINITY; self.n];
+            let mut prev = vec![u32::MAX; self.n];
+            let mut heap = std::collections::BinaryHeap::new();
+            for &v in &self.topology.loops[hole] {
+                dist[v as usize] = 0.0;
+                heap.push((std::cmp::Reverse(OrdF64(0.0)), v));
+            }
+            let mut reached = None;
+            while let Some((std::cmp::Reverse(OrdF64(d)), v)) = heap.pop() {
+                if d > dist[v as usize] {
+                    continue;
+                }
+                if loop_of[v as usize] != usize::MAX && loop_of[v as usize] != hole {
+                    reached = Some(v);
+                    break;
+                }
+                for &(w, l) in &adj[v as usize] {
+                    let nd = d + l;
+                    if nd < dist[w as usize] && loop_of[w as usize] != hole {
+                        dist[w as usize] = nd;
+                        prev[w as usize] = v;
+                        heap.push((std::cmp::Reverse(OrdF64(nd)), w));
+                    }
+                }
+            }
+            let Some(mut v) = reached else { return };
+            let mut cut = std::collections::HashSet::new();
+            while prev[v as usize] != u32::MAX {
+                let u = prev[v as usize];
+                cut.insert((u.min(v), u.max(v)));
+                v = u;
+            }
+            let (corners, n) =
+                separate_fans(std::mem::take(&mut self.corners), &self.collapsed, self.n, &cut);
+            (self.corners, self.n) = (corners, n);
+            self.topology = self.topology();
+        }
+    }
+
+    /// The faces joined across edges that exactly two live faces use in opposite directions, as
+    /// connected parts in order of their first face (module docs): the patch's pieces of
+    /// consistent winding and manifold edges. Collapsed faces go with the first part.
+    fn consistent_parts(&self) -> Vec<Vec<u32>> {
+        let mut uses: HashMap<(u32, u32), Vec<(u32, bool)>> = HashMap::new();
+        for (t, c) in self.live() {
+            for k in 0..3 {
+                let (a, b) = (c[k], c[(k + 1) % 3]);
+                uses.entry((a.min(b), a.max(b))).or_default().push((t as u32, a < b));
+            }
+        }
+        let mut dsu = crate::uvstats::Dsu::new(self.faces.len());
+        for (t, c) in self.live() {
+            for k in 0..3 {
+                let (a, b) = (c[k], c[(k + 1) % 3]);
+                if let [(f, x), (g, y)] = uses[&(a.min(b), a.max(b))][..]
+                    && x != y
+                {
+                    debug_assert!(f as usize == t || g as usize == t);
+                    dsu.union(f, g);
+                }
+            }
+        }
+        let mut label: HashMap<u32, usize> = HashMap::new();
+        let mut parts: Vec<Vec<u32>> = Vec::new();
+        for t in 0..self.faces.len() {
+            let root = if self.collapsed[t] { 0 } else { dsu.find(t as u32) };
+            let next = parts.len();
+            let l = *label.entry(root).or_insert(next);
+            if l == parts.len() {
+                parts.push(Vec::new());
+            }
+            parts[l].push(self.faces[t]);
+        }
+        parts
+    }
+
+    /// This patch's working positions taken from `parent`'s positions `p` (the patch's faces
+    /// are some of the parent's, in the same order).
+    fn inherit(&self, parent: &Patch, p: &[[f64; 2]]) -> Vec<[f64; 2]> {
+        let index: HashMap<u32, usize> = parent.faces.iter().enumerate().map(|(i, &f)| (f, i)).collect();
+        let mut q = vec![[0.0f64; 2]; self.n];
+        for (j, &f) in self.faces.iter().enumerate() {
+            let i = index[&f];
+            for k in 0..3 {
+                q[self.corners[j][k] as usize] = p[parent.corners[i][k] as usize];
+            }
+        }
+        q
+    }
+
+    /// Grows the good faces (not `bad`) of the map `p` back over the bad ones, breadth-first
+    /// across shared edges: a bad face joins when its corners already placed (used by a good
+    /// face, or placed by this growth) and, for a face with one corner not yet placed, that
+    /// corner put where the face's rest shape puts it on the placed edge, make a positive
+    /// triangle that overlaps no good face. Returns the faces still bad and the positions.
+    fn grow(&self, bad: &[bool], p: &[[f64; 2]]) -> (Vec<bool>, Vec<[f64; 2]>) {
+        let mut bad = bad.to_vec();
+        let mut q = p.to_vec();
+        let mut placed = vec![false; self.n];
+        let mut by_edge: HashMap<(u32, u32), Vec<u32>> = HashMap::new();
+        let mut good: Vec<(usize, [[f64; 2]; 3])> = Vec::new();
+        for (t, c) in self.live() {
+            for k in 0..3 {
+                let (a, b) = (c[k], c[(k + 1) % 3]);
+                by_edge.entry((a.min(b), a.max(b))).or_default().push(t as u32);
+            }
+            if !bad[t] {
+                c.iter().for_each(|&v| placed[v as usize] = true);
+                good.push((t, c.map(|v| p[v as usize])));
+            }
+        }
+        if good.is_empty() {
+            return (bad, q);
+        }
+        let mut grid = TriangleGrid::new(&good);
+        let mut queue: std::collections::VecDeque<u32> = std::collections::VecDeque::new();
+        for (t, c) in self.live() {
+            if bad[t] && c.iter().filter(|&&v| placed[v as usize]).count() >= 2 {
+                queue.push_back(t as u32);
+            }
+        }
+        while let Some(t) = queue.pop_front() {
+            let t = t as usize;
+            if !bad[t] {
+                continue;
+            }
+            let c = self.corners[t];
+            let missing: Vec<usize> = (0..3).filter(|&k| !placed[c[k] as usize]).collect();
+            let tri = match missing[..] {
+                [] => c.map(|v| q[v as usize]),
+                [k] => {
+                    // Corner k from the rest shape, by the similarity taking the rest edge
+                    // (k+1, k+2) onto its placed image.
+                    let x = self.rest[t].x;
+                    let (i, j) = ((k + 1) % 3, (k + 2) % 3);
+                    let (xa, xb, xk) = (x[i], x[j], x[k]);
+                    let (qa, qb) = (q[c[i] as usize], q[c[j] as usize]);
+                    let (ex, eq) = ([xb[0] - xa[0], xb[1] - xa[1]], [qb[0] - qa[0], qb[1] - qa[1]]);
+                    let l2 = ex[0] * ex[0] + ex[1] * ex[1];
+                    if !is_positive(l2) {
+                        continue;
+                    }
+                    // Complex ratio eq / ex as (cos, sin) · scale.
+                    let (re, im) =
+                        ((eq[0] * ex[0] + eq[1] * ex[1]) / l2, (eq[1] * ex[0] - eq[0] * ex[1]) / l2);
+                    let d = [xk[0] - xa[0], xk[1] - xa[1]];
+                    let pk = [qa[0] + re * d[0] - im * d[1], qa[1] + im * d[0] + re * d[1]];
+                    let mut tri = c.map(|v| q[v as usize]);
+                    tri[k] = pk;
+                    tri
+                }
+                _ => continue,
+            };
+            if !is_positive(area2(tri)) || tri.iter().flatten().any(|x| !x.is_finite()) || grid.overlaps(tri)
+            {
+                continue;
+            }
+            for (k, &v) in c.iter().enumerate() {
+                if !placed[v as usize] {
+                    placed[v as usize] = true;
+                    q[v as usize] = tri[k];
+                }
+            }
+            bad[t] = false;
+            grid.insert(tri);
+            for k in 0..3 {
+                let (a, b) = (c[k], c[(k + 1) % 3]);
+                for &o in &by_edge[&(a.min(b), a.max(b))] {
+                    if bad[o as usize] {
+                        queue.push_back(o);
+                    }
+                }
+            }
+        }
+        (bad, q)
+    }
+
+    /// Faces of `p` that are not positive, or positive and overlapping another positive face
+    /// (interiors intersect; touching is not overlapping), found through a hashed grid. Collapsed
+    /// faces are never bad.
+    fn bad_faces(&self, p: &[[f64; 2]]) -> Vec<bool> {
+        let mut bad = vec![false; self.faces.len()];
+        let mut tris: Vec<(usize, [[f64; 2]; 3])> = Vec::new();
+        for (t, c) in self.live() {
+            let q = c.map(|i| p[i as usize]);
+            if area2(q) > 0.0 {
+                tris.push((t, q));
+            } else {
+                bad[t] = true;
+            }
+        }
+        if tris.is_empty() {
+            return bad;
+        }
+        let mean: f64 = tris
+            .iter()
+            .map(|(_, q)| {
+                (q[1][0] - q[0][0]).hypot(q[1][1] - q[0][1]) + (q[2][0] - q[0][0]).hypot(q[2][1] - q[0][1])
+            })
+            .sum::<f64>()
+            / (2 * tris.len()) as f64;
+        let cell = (2.0 * mean).max(f64::MIN_POSITIVE);
+        let key = |x: f64| (x / cell).floor() as i64;
+        let mut grid: HashMap<(i64, i64), Vec<u32>> = HashMap::new();
+        for (k, (t, q)) in tris.iter().enumerate() {
+            let xs = q.map(|v| v[0]);
+            let ys = q.map(|v| v[1]);
+            let (x0, x1) = (
+                key(xs.iter().copied().fold(f64::INFINITY, f64::min)),
+                key(xs.iter().copied().fold(f64::NEG_INFINITY, f64::max)),
+            );
+            let (y0, y1) = (
+                key(ys.iter().copied().fold(f64::INFINITY, f64::min)),
+                key(ys.iter().copied().fold(f64::NEG_INFINITY, f64::max)),
+            );
+            if (x1 - x0 + 1).saturating_mul(y1 - y0 + 1) > 64 * tris.len() as i64 {
+                // One triangle across the whole patch: test it against all.
+                for (o, (u, r)) in tris.iter().enumerate() {
+                    if o != k && triangles_overlap(*q, *r) {
+                        bad[*t] = true;
+                        bad[*u] = true;
+                    }
+                }
+                continue;
+            }
+            for x in x0..=x1 {
+                for y in y0..=y1 {
+                    let bucket = grid.entry((x, y)).or_default();
+                    for &o in bucket.iter() {
+                        let (u, r) = tris[o as usize];
+                        if triangles_overlap(*q, r) {
+                            bad[*t] = true;
+                            bad[u] = true;
+                        }
+                    }
+                    bucket.push(k as u32);
+                }
+            }
+        }
+        bad
+    }
+
+    /// The connected parts (faces joined across a shared edge, both with the same `label`) of
+    /// the patch, in order of their first face.
+    fn components(&self, label: &[bool]) -> Vec<Vec<u32>> {
+        let mut first: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut dsu = crate::uvstats::Dsu::new(self.faces.len());
+        for (t, c) in self.corners.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b) = (c[k], c[(k + 1) % 3]);
+                match first.entry((a.min(b), a.max(b))) {
+                    std::collections::hash_map::Entry::Vacant(e) => {
+                        e.insert(t as u32);
+                    }
+                    std::collections::hash_map::Entry::Occupied(e) => {
+                        let o = *e.get();
+                        if label[o as usize] == label[t] {
+                            dsu.union(o, t as u32);
+                        }
+                    }
+                }
+            }
+        }
+        let mut index: HashMap<u32, usize> = HashMap::new();
+        let mut parts: Vec<Vec<u32>> = Vec::new();
+        for t in 0..self.faces.len() {
+            let root = dsu.find(t as u32);
+            let next = parts.len();
+            let i = *index.entry(root).or_insert(next);
+            if i == parts.len() {
+                parts.push(Vec::new());
+            }
+            parts[i].push(self.faces[t]);
+        }
+        parts
+    }
+
+    /// Two parts of connected faces grown from two far-apart faces (module docs).
+    fn halves(&self) -> [Vec<u32>; 2] {
+        let m = self.faces.len();
+        let mut by_edge: HashMap<(u32, u32), Vec<u32>> = HashMap::new();
+        for (t, c) in self.corners.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b) = (c[k], c[(k + 1) % 3]);
+                by_edge.entry((a.min(b), a.max(b))).or_default().push(t as u32);
+            }
+        }
+        let mut adj: Vec<Vec<u32>> = vec![Vec::new(); m];
+        for (t, c) in self.corners.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b) = (c[k], c[(k + 1) % 3]);
+                for &o in &by_edge[&(a.min(b), a.max(b))] {
+                    if o as usize != t && !adj[t].contains(&o) {
+                        adj[t].push(o);
+                    }
+                }
+            }
+        }
+        let bfs = |sources: &[u32]| -> (Vec<u32>, Vec<u32>) {
+            let (mut dist, mut owner) = (vec![u32::MAX; m], vec![u32::MAX; m]);
+            let mut queue = std::collections::VecDeque::new();
+            for (i, &s) in sources.iter().enumerate() {
+                dist[s as usize] = 0;
+                owner[s as usize] = i as u32;
+                queue.push_back(s);
+            }
+            while let Some(f) = queue.pop_front() {
+                for &o in &adj[f as usize] {
+                    if dist[o as usize] == u32::MAX {
+                        dist[o as usize] = dist[f as usize] + 1;
+                        owner[o as usize] = owner[f as usize];
+                        queue.push_back(o);
+                    }
+                }
+            }
+            (dist, owner)
+        };
+        let farthest = |dist: &[u32]| -> u32 {
+            (0..m as u32)
+                .max_by_key(|&f| (dist[f as usize] != u32::MAX, dist[f as usize], std::cmp::Reverse(f)))
+                .unwrap_or(0)
+        };
+        let a = farthest(&bfs(&[0]).0);
+        let b = farthest(&bfs(&[a]).0);
+        let (_, owner) = bfs(&[a, b]);
+        let mut halves = [Vec::new(), Vec::new()];
+        for (t, &o) in owner.iter().enumerate() {
+            // Faces no edge reaches (only possible through collapsed faces) go with the first part.
+            halves[if o == 1 { 1 } else { 0 }].push(self.faces[t]);
+        }
+        if halves[1].is_empty() {
+            let moved = halves[0].split_off(halves[0].len() / 2);
+            halves[1] = moved;
+        }
+        halves
+    }
+}
+
+/// `corners` with every unknown whose live faces form several fans given one unknown per fan:
+/// the first fan (in face order) keeps it, the others get new ones. Two faces are in one fan of
+/// an unknown when they are joined across an edge at it that exactly two live faces use, in
+/// opposite directions, and that is not in `cut`. So two pieces touching at one point (a
+/// "bowtie"), edges of three or more faces, faces wound against their neighbours and the edges
+/// of `cut` all become boundary. Returns the corners and the new number of unknowns.
+fn separate_fans(
+    mut corners: Vec<[u32; 3]>,
+    collapsed: &[bool],
+    n: usize,
+    cut: &std::collections::HashSet<(u32, u32)>,
+) -> (Vec<[u32; 3]>, usize) {
+    let mut uses: HashMap<(u32, u32), Vec<(u32, usize)>> = HashMap::with_capacity(3 * corners.len());
+    for (t, c) in corners.iter().enumerate() {
+        if !collapsed[t] {
+            for k in 0..3 {
+                let (a, b) = (c[k], c[(k + 1) % 3]);
+                uses.entry((a.min(b), a.max(b))).or_default().push((t as u32, k));
+            }
+        }
+    }
+    // The corner of face `f` at unknown `x`, `f`'s edge `k` having `x` as an end.
+    let corner_at = |corners: &[[u32; 3]], f: u32, k: usize, x: u32| -> u32 {
+        let j = if corners[f as usize][k] == x { k } else { (k + 1) % 3 };
+        3 * f + j as u32
+    };
+    let mut dsu = crate::uvstats::Dsu::new(3 * corners.len());
+    for (t, c) in corners.iter().enumerate() {
+        if collapsed[t] {
+            continue;
+        }
+        for k in 0..3 {
+            let (a, b) = (c[k], c[(k + 1) % 3]);
+            let key = (a.min(b), a.max(b));
+            if cut.contains(&key) {
+                continue;
+            }
+            if let [(f, kf), (g, kg)] = uses[&key][..]
+                && f as usize == t
+                && corners[g as usize][kg] == b
+            {
+                for x in [a, b] {
+                    dsu.union(corner_at(&corners, f, kf, x), corner_at(&corners, g, kg, x));
+                }
+            }
+        }
+    }
+    let mut fan_of: HashMap<u32, u32> = HashMap::new();
+    let mut owner_root: Vec<u32> = vec![u32::MAX; n];
+    let mut next = n as u32;
+    for (t, c) in corners.iter_mut().enumerate() {
+        if collapsed[t] {
+            continue;
+        }
+        for (k, corner) in c.iter_mut().enumerate() {
+            let v = *corner as usize;
+            let root = dsu.find(3 * t as u32 + k as u32);
+            if owner_root[v] == u32::MAX {
+                owner_root[v] = root;
+            } else if owner_root[v] != root {
+                let id = *fan_of.entry(root).or_insert_with(|| {
+                    next += 1;
+                    next - 1
+                });
+                *corner = id;
+            }
+        }
+    }
+    (corners, next as usize)
+}
+
+/// Triangles in a hashed uniform grid, for overlap queries while a part grows.
+struct TriangleGrid {
+    cell: f64,
+    cells: HashMap<(i64, i64), Vec<u32>>,
+    tris: Vec<[[f64; 2]; 3]>,
+}
+
+impl TriangleGrid {
+    fn new(start: &[(usize, [[f64; 2]; 3])]) -> TriangleGrid {
+        let mean: f64 = start
+            .iter()
+            .map(|(_, q)| {
+                (q[1][0] - q[0][0]).hypot(q[1][1] - q[0][1]) + (q[2][0] - q[0][0]).hypot(q[2][1] - q[0][1])
+            })
+            .sum::<f64>()
+            / (2 * start.len().max(1)) as f64;
+        let mut g = TriangleGrid {
+            cell: (2.0 * mean).max(f64::MIN_POSITIVE),
+            cells: HashMap::new(),
+            tris: Vec::new(),
+        };
+        for (_, t) in start {
+            g.insert(*t);
+        }
+        g
+    }
+
+    fn range(&self, t: [[f64; 2]; 3]) -> Option<[i64; 4]> {
+        let key = |x: f64| (x / self.cell).floor() as i64;
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for v in t {
+            for k in 0..2 {
+                lo[k] = lo[k].min(v[k]);
+                hi[k] = hi[k].max(v[k]);
+            }
+        }
+        let r = [key(lo[0]), key(hi[0]), key(lo[1]), key(hi[1])];
+        // A triangle over very many cells (far larger than its neighbours) is not indexed.
+        ((r[1] - r[0] + 1).saturating_mul(r[3] - r[2] + 1) <= 4096).then_some(r)
+    }
+
+    fn insert(&mut self, t: [[f64; 2]; 3]) {
+        let id = self.tris.len() as u32;
+        self.tris.push(t);
+        let Some([x0, x1, y0, y1]) = self.range(t) else { return };
+        for x in x0..=x1 {
+            for y in y0..=y1 {
+                self.cells.entry((x, y)).or_default().push(id);
+            }
+        }
+    }
+
+    /// Whether `t` overlaps a stored triangle (a triangle too large to index is never found,
+    /// so [`Patch::is_injective`] checks the result again).
+    fn overlaps(&self, t: [[f64; 2]; 3]) -> bool {
+        let Some([x0, x1, y0, y1]) = self.range(t) else { return true };
+        for x in x0..=x1 {
+            for y in y0..=y1 {
+                if let Some(ids) = self.cells.get(&(x, y))
+                    && ids.iter().any(|&i| triangles_overlap(t, self.tris[i as usize]))
+                {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+}
+
+/// Whether two counter-clockwise triangles' interiors intersect: no edge of either has the other
+/// wholly on its outer side or on it (separating axes of two convex polygons).
+fn triangles_overlap(a: [[f64; 2]; 3], b: [[f64; 2]; 3]) -> bool {
+    let separated = |s: [[f64; 2]; 3], t: [[f64; 2]; 3]| {
+        (0..3).any(|k| {
+            let (o, e) = (s[k], s[(k + 1) % 3]);
+            t.iter().all(|v| (e[0] - o[0]) * (v[1] - o[1]) - (e[1] - o[1]) * (v[0] - o[0]) <= 0.0)
+        })
+    };
+    !separated(a, b) && !separated(b, a)
+}
+
+/// An `f64` ordered by [`f64::total_cmp`], for the Dijkstra heap.
+#[derive(Clone, Copy, PartialEq)]
+struct OrdF64(f64);
+
+impl Eq for OrdF64 {}
+
+impl PartialOrd for OrdF64 {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for OrdF64 {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.0.total_cmp(&other.0)
+    }
+}
+
+/// The smallest positive root of `a t² + b t + c` (infinity when there is none).
+fn smallest_positive_root(a: f64, b: f64, c: f64) -> f64 {
+    let scale = a.abs().max(b.abs()).max(c.abs());
+    if scale == 0.0 {
+        return f64::INFINITY;
+    }
+    let (a, b, c) = (a / scale, b / scale, c / scale);
+    let positive = |t: f64| if t > 0.0 && t.is_finite() { t } else { f64::INFINITY };
+    if a.abs() < 1e-12 {
+        return if b.abs() < 1e-300 { f64::INFINITY } else { positive(-c / b) };
+    }
+    let disc = b * b - 4.0 * a * c;
+    if disc < 0.0 {
+        return f64::INFINITY;
+    }
+    // Numerically stable pair of roots.
+    let q = -0.5 * (b + b.signum() * disc.sqrt());
+    let (r1, r2) = (q / a, if q != 0.0 { c / q } else { f64::INFINITY });
+    positive(r1).min(positive(r2))
+}
+
+/// Whether any two boundary segments that share no endpoint cross (module docs), found
+/// through a hashed uniform grid of the segments' bounding boxes.
+fn boundary_crosses(loops: &[Vec<u32>], p: &[[f64; 2]]) -> bool {
+    let segments: Vec<[u32; 2]> =
+        loops.iter().flat_map(|l| (0..l.len()).map(move |i| [l[i], l[(i + 1) % l.len()]])).collect();
+    if segments.len() < 3 {
+        return false;
+    }
+    let total: f64 = segments
+        .iter()
+        .map(|s| {
+            let (a, b) = (p[s[0] as usize], p[s[1] as usize]);
+            (b[0] - a[0]).hypot(b[1] - a[1])
+        })
+        .sum();
+    let cell = (2.0 * total / segments.len() as f64).max(f64::MIN_POSITIVE);
+    let mut grid: HashMap<(i64, i64), Vec<u32>> = HashMap::new();
+    let key = |x: f64| (x / cell).floor() as i64;
+    for (i, s) in segments.iter().enumerate() {
+        let (a, b) = (p[s[0] as usize], p[s[1] as usize]);
+        let (x0, x1) = (key(a[0].min(b[0])), key(a[0].max(b[0])));
+        let (y0, y1) = (key(a[1].min(b[1])), key(a[1].max(b[1])));
+        if (x1 - x0 + 1).saturating_mul(y1 - y0 + 1) > 4 * segments.len() as i64 {
+            // A segment as long as the whole boundary: test it against everything.
+            for j in 0..segments.len() {
+                if j != i && segments_cross(segments[i], segments[j], p) {
+                    return true;
+                }
+            }
+            continue;
+        }
+        for x in x0..=x1 {
+            for y in y0..=y1 {
+                let bucket = grid.entry((x, y)).or_default();
+                for &j in bucket.iter() {
+                    if segments_cross(*s, segments[j as usize], p) {
+                        return true;
+                    }
+                }
+                bucket.push(i as u32);
+            }
+        }
+    }
+    false
+}
+
+/// Whether segments `s` and `t` (unknown pairs) cross properly: each has its ends strictly on
+/// both sides of the other's line. Segments that only touch (an end on the other, collinear
+/// overlap, a slit whose sides coincide) do not: they cover no area twice.
+fn segments_cross(s: [u32; 2], t: [u32; 2], p: &[[f64; 2]]) -> bool {
+    if s[0] == t[0] || s[0] == t[1] || s[1] == t[0] || s[1] == t[1] {
+        return false;
+    }
+    let [a, b] = s.map(|i| p[i as usize]);
+    let [c, d] = t.map(|i| p[i as usize]);
+    let orient =
+        |o: [f64; 2], u: [f64; 2], v: [f64; 2]| (u[0] - o[0]) * (v[1] - o[1]) - (u[1] - o[1]) * (v[0] - o[0]);
+    let (d1, d2, d3, d4) = (orient(c, d, a), orient(c, d, b), orient(a, b, c), orient(a, b, d));
+    ((d1 > 0.0 && d2 < 0.0) || (d1 < 0.0 && d2 > 0.0)) && ((d3 > 0.0 && d4 < 0.0) || (d3 < 0.0 && d4 > 0.0))
+}
+
+/// The free space round a patch inside a box, triangulated (constrained Delaunay, `spade`), whose
+/// triangles join the SLIM energy with their current shape as rest shape and small weights, and
+/// the flip-avoiding line search (Jiang, Schaefer, Panozzo, "Simplicial Complex Augmentation
+/// Framework for Bijective Maps", 2017): while no scaffold triangle flips, no part of the
+/// boundary can cross another, and as two parts approach, the triangles between them are
+/// squeezed and push back. Rebuilt every round.
+struct Scaffold {
+    /// Triangles; a vertex `< n` is an unknown of the patch, `n + k` the fixed box corner `k`.
+    tris: Vec<[u32; 3]>,
+    rest: Vec<Rest>,
+    corners: [[f64; 2]; 4],
+    n: usize,
+}
+
+impl Scaffold {
+    /// The scaffold round `p`; `None` when the boundary cannot be triangulated as it is (two
+    /// boundary vertices at one point, touching boundary segments, no boundary).
+    fn build(patch: &Patch, p: &[[f64; 2]]) -> Option<Scaffold> {
+        use spade::handles::FixedVertexHandle;
+        use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
+        let loops = &patch.topology.loops;
+        let ids: Vec<u32> = loops.iter().flatten().copied().collect();
+        if ids.len() < 3 {
+            return None;
+        }
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for &v in &ids {
+            for k in 0..2 {
+                lo[k] = lo[k].min(p[v as usize][k]);
+                hi[k] = hi[k].max(p[v as usize][k]);
+            }
+        }
+        let m = (hi[0] - lo[0]).max(hi[1] - lo[1]) * SCAFFOLD_MARGIN;
+        if !(m > 0.0 && m.is_finite()) {
+            return None;
+        }
+        let corners =
+            [[lo[0] - m, lo[1] - m], [hi[0] + m, lo[1] - m], [hi[0] + m, hi[1] + m], [lo[0] - m, hi[1] + m]];
+        let mut vertices: Vec<Point2<f64>> =
+            ids.iter().map(|&v| Point2::new(p[v as usize][0], p[v as usize][1])).collect();
+        vertices.extend(corners.iter().map(|c| Point2::new(c[0], c[1])));
+        let mut edges = Vec::with_capacity(ids.len());
+        let mut offset = 0;
+        for l in loops {
+            for i in 0..l.len() {
+                edges.push([offset + i, offset + (i + 1) % l.len()]);
+            }
+            offset += l.len();
+        }
+        let mut conflicts = 0usize;
+        let cdt = ConstrainedDelaunayTriangulation::<Point2<f64>>::try_bulk_load_cdt(
+            vertices,
+            edges.clone(),
+            |_| conflicts += 1,
+        )
+        .ok()?;
+        if conflicts > 0 || cdt.num_vertices() != ids.len() + 4 || cdt.num_constraints() != edges.len() {
+            return None;
+        }
+        // The faces right of each boundary edge (the patch lies left of it) and everything
+        // reachable from them without crossing a constraint.
+        let mut scaffold = vec![false; cdt.num_all_faces()];
+        let mut stack = Vec::new();
+        for e in &edges {
+            let edge = cdt.get_edge_from_neighbors(
+                FixedVertexHandle::from_index(e[0]),
+                FixedVertexHandle::from_index(e[1]),
+            )?;
+            if let Some(f) = edge.rev().face().as_inner() {
+                stack.push(f.fix());
+            }
+        }
+        while let Some(f) = stack.pop() {
+            if std::mem::replace(&mut scaffold[f.index()], true) {
+                continue;
+            }
+            for e in cdt.face(f).adjacent_edges() {
+                if !e.as_undirected().is_constraint_edge()
+                    && let Some(g) = e.rev().face().as_inner()
+                    && !scaffold[g.index()]
+                {
+                    stack.push(g.fix());
+                }
+            }
+        }
+        let n = patch.n;
+        let id = |i: usize| if i < ids.len() { ids[i] } else { (n + i - ids.len()) as u32 };
+        let mut tris = Vec::new();
+        for f in cdt.inner_faces() {
+            if scaffold[f.fix().index()] {
+                tris.push(f.vertices().map(|v| id(v.fix().index())));
+            }
+        }
+        let mut out = Scaffold { tris, rest: Vec::new(), corners, n };
+        let total: f64 = patch.live().map(|(t, _)| patch.rest[t].weight).sum();
+        let weight = SCAFFOLD_WEIGHT * total / out.tris.len().max(1) as f64;
+        let mut rest = Vec::with_capacity(out.tris.len());
+        for t in &out.tris {
+            let x = t.map(|v| out.pos(p, v));
+            if !is_positive(area2(x)) {
+                return None;
+            }
+            rest.push(Rest::new(x, weight, false));
+        }
+        out.rest = rest;
+        Some(out)
+    }
+
+    fn pos(&self, p: &[[f64; 2]], v: u32) -> [f64; 2] {
+        if (v as usize) < self.n { p[v as usize] } else { self.corners[v as usize - self.n] }
+    }
+
+    /// The scaffold's energy at `p`; `None` when a triangle is not positive.
+    fn energy(&self, p: &[[f64; 2]]) -> Option<f64> {
+        let mut e = 0.0;
+        for (t, r) in self.tris.iter().zip(&self.rest) {
+            let d = sym_dirichlet(r.jacobian(t.map(|v| self.pos(p, v))));
+            if !d.is_finite() {
+                return None;
+            }
+            e += r.weight * d;
+        }
+        Some(e)
+    }
+
+    /// The first `t > 0` at which a scaffold triangle's area along `p + t d` reaches zero.
+    fn max_step(&self, p: &[[f64; 2]], d: &[[f64; 2]]) -> f64 {
+        let zero = [0.0, 0.0];
+        let dir = |v: u32| if (v as usize) < self.n { d[v as usize] } else { zero };
+        self.tris
+            .iter()
+            .map(|t| triangle_zero_step(t.map(|v| self.pos(p, v)), t.map(dir)))
+            .fold(f64::INFINITY, f64::min)
+    }
+}
+
+/// The first `t > 0` at which triangle `q + t d` has zero signed area (infinity when never).
+fn triangle_zero_step(q: [[f64; 2]; 3], d: [[f64; 2]; 3]) -> f64 {
+    let [a, b, c] = q;
+    let [da, db, dc] = d;
+    let (e1, e2) = ([b[0] - a[0], b[1] - a[1]], [c[0] - a[0], c[1] - a[1]]);
+    let (f1, f2) = ([db[0] - da[0], db[1] - da[1]], [dc[0] - da[0], dc[1] - da[1]]);
+    let cr = |x: [f64; 2], y: [f64; 2]| x[0] * y[1] - x[1] * y[0];
+    smallest_positive_root(cr(f1, f2), cr(e1, f2) + cr(f1, e2), cr(e1, e2))
+}
+
+/// SLIM's reweighted least-squares terms of one face at UV triangle `q`: four rows `a` over the
+/// six local unknowns (`u` of corners 0–2, then `v`) and their targets, the residuals
+/// `(W J)_{r,c} − (W R)_{r,c}` being `a · z − target`; `None` when they are not finite.
+fn slim_terms(rest: &Rest, q: [[f64; 2]; 3]) -> Option<([[f64; 6]; 4], [f64; 4])> {
+    let j = rest.jacobian(q);
+    let (phi, s1, s2, theta) = svd2(j);
+    // Symmetric Dirichlet: w² = f'(σ) / (2 (σ − 1)) = (σ + 1)(σ² + 1) / σ³.
+    let weight = |s: f64| ((s + 1.0) * (s * s + 1.0) / (s * s * s)).sqrt();
+    let w = mul(mul(rot(phi), [[weight(s1), 0.0], [0.0, weight(s2)]]), rot(-phi));
+    let wr = mul(w, rot(phi + theta));
+    let mut rows = [[0.0f64; 6]; 4];
+    let mut targets = [0.0f64; 4];
+    for r in 0..2 {
+        for col in 0..2 {
+            let a = &mut rows[2 * r + col];
+            for s in 0..2 {
+                for k in 0..3 {
+                    a[3 * s + k] = w[r][s] * rest.g[k][col];
+                }
+            }
+            targets[2 * r + col] = wr[r][col];
+        }
+    }
+    let finite = rows.iter().flatten().chain(&targets).all(|x| x.is_finite());
+    finite.then_some((rows, targets))
+}
+
+/// The SLIM global step's system: the fixed sparsity pattern of the 2n × 2n matrix (lower
+/// triangle), where each face's 21 entries land in it, and the symbolic factorisation.
+struct SlimSystem {
+    matrix: SparseColMat<usize, f64>,
+    /// Per live face, the value index of each `(row, col)` pair of its 6 × 6 block with
+    /// `row ≥ col` in system numbering (`u` of unknown `i` is row `i`, `v` row `n + i`).
+    slots: Vec<[[usize; 6]; 6]>,
+    symbolic: SymbolicLlt<usize>,
+    /// Diagonal proximal weight, `1e-4 ×` the mean face weight: keeps the system positive
+    /// definite (translations are otherwise free) and each step small where nothing pulls.
+    proximal: f64,
+}
+
+impl SlimSystem {
+    fn new(patch: &Patch) -> Option<SlimSystem> {
+        let n = patch.n;
+        let index = |corner: &[u32; 3], a: usize| -> usize { (a / 3) * n + corner[a % 3] as usize };
+        let mut triplets = Vec::new();
+        for i in 0..2 * n {
+            triplets.push(Triplet::new(i, i, 0.0));
+        }
+        for (_, c) in patch.live() {
+            for a in 0..6 {
+                for b in 0..6 {
+                    let (r, col) = (index(&c, a), index(&c, b));
+                    if r >= col {
+                        triplets.push(Triplet::new(r, col, 0.0));
+                    }
+                }
+            }
+        }
+        let matrix = SparseColMat::<usize, f64>::try_new_from_triplets(2 * n, 2 * n, &triplets).ok()?;
+        let (col_ptr, row_idx) = (matrix.symbolic().col_ptr().to_vec(), matrix.symbolic().row_idx().to_vec());
+        let find = |r: usize, col: usize| -> usize {
+            let rows = &row_idx[col_ptr[col]..col_ptr[col + 1]];
+            col_ptr[col] + rows.binary_search(&r).expect("entry in the pattern")
+        };
+        let slots = patch
+            .live()
+            .map(|(_, c)| {
+                let mut s = [[usize::MAX; 6]; 6];
+                for (a, row) in s.iter_mut().enumerate() {
+                    for (b, slot) in row.iter_mut().enumerate() {
+                        let (r, col) = (index(&c, a), index(&c, b));
+                        if r >= col {
+                            *slot = find(r, col);
+                        }
+                    }
+                }
+                s
+            })
+            .collect();
+        let symbolic = SymbolicLlt::try_new(matrix.symbolic(), Side::Lower).ok()?;
+        let live = patch.live().count().max(1);
+        let proximal = 1e-4 * patch.live().map(|(t, _)| patch.rest[t].weight).sum::<f64>() / live as f64;
+        Some(SlimSystem { matrix, slots, symbolic, proximal })
+    }
+
+    /// The global step at `p`: the positions minimising `Σ_t A_t ‖W_t (J_t − R_t)‖² +
+    /// proximal ‖q − p‖²`, with SLIM's weights `W_t` and rotations `R_t` of `p`.
+    fn global(&mut self, patch: &Patch, p: &[[f64; 2]]) -> Option<Vec<[f64; 2]>> {
+        let n = patch.n;
+        let mut rhs = Mat::<f64>::zeros(2 * n, 1);
+        {
+            let vals = self.matrix.val_mut();
+            vals.iter_mut().for_each(|v| *v = 0.0);
+            for (live_index, (t, c)) in patch.live().enumerate() {
+                let rest = &patch.rest[t];
+                let (a_rows, targets) = slim_terms(rest, c.map(|i| p[i as usize]))?;
+                let slots = &self.slots[live_index];
+                for (a, target) in a_rows.iter().zip(targets) {
+                    for x in 0..6 {
+                        let gx = (x / 3) * n + c[x % 3] as usize;
+                        rhs[(gx, 0)] += rest.weight * a[x] * target;
+                        for y in 0..=x {
+                            let gy = (y / 3) * n + c[y % 3] as usize;
+                            // Each unordered pair once: the lower triangle holds it.
+                            let slot = if gx >= gy { slots[x][y] } else { slots[y][x] };
+                            vals[slot] += rest.weight * a[x] * a[y];
+                        }
+                    }
+                }
+            }
+            for (i, q) in p.iter().enumerate() {
+                rhs[(i, 0)] += self.proximal * q[0];
+                rhs[(n + i, 0)] += self.proximal * q[1];
+            }
+        }
+        // Diagonal entries (the first of each column in the sorted pattern's lower triangle).
+        let col_ptr = self.matrix.symbolic().col_ptr().to_vec();
+        let row_idx = self.matrix.symbolic().row_idx().to_vec();
+        let vals = self.matrix.val_mut();
+        for (col, &start) in col_ptr[..2 * n].iter().enumerate() {
+            debug_assert_eq!(row_idx[start], col);
+            vals[start] += self.proximal;
+        }
+        let llt =
+            Llt::try_new_with_symbolic(self.symbolic.clone(), self.matrix.as_ref(), Side::Lower).ok()?;
+        llt.solve_in_place(rhs.as_mut());
+        let q: Vec<[f64; 2]> = (0..n).map(|i| [rhs[(i, 0)], rhs[(n + i, 0)]]).collect();
+        q.iter().flatten().all(|x| x.is_finite()).then_some(q)
+    }
+    /// [`SlimSystem::global`] with the scaffold's triangles in the energy: the pattern changes
+    /// with the scaffold, so the system is assembled and factored anew.
+    fn global_scaffold(&self, patch: &Patch, p: &[[f64; 2]], sc: &Scaffold) -> Option<Vec<[f64; 2]>> {
+        let n = patch.n;
+        let mut rhs = Mat::<f64>::zeros(2 * n, 1);
+        let mut triplets: Vec<Triplet<usize, usize, f64>> =
+            (0..2 * n).map(|i| Triplet::new(i, i, self.proximal)).collect();
+        let island = patch.live().map(|(t, c)| (c, &patch.rest[t]));
+        let scaffold = sc.tris.iter().copied().zip(&sc.rest);
+        for (verts, rest) in island.chain(scaffold) {
+            let (rows, targets) = slim_terms(rest, verts.map(|v| sc.pos(p, v)))?;
+            for (a, target) in rows.iter().zip(targets) {
+                // Fixed corners move to the right-hand side.
+                let fixed: f64 = (0..6)
+                    .filter(|&y| verts[y % 3] as usize >= n)
+                    .map(|y| a[y] * sc.corners[verts[y % 3] as usize - n][y / 3])
+                    .sum();
+                for x in 0..6 {
+                    let vx = verts[x % 3] as usize;
+                    if vx >= n {
+                        continue;
+                    }
+                    let gx = (x / 3) * n + vx;
+                    rhs[(gx, 0)] += rest.weight * a[x] * (target - fixed);
+                    for y in 0..6 {
+                        let vy = verts[y % 3] as usize;
+                        let gy = (y / 3) * n + vy;
+                        if vy < n && gy <= gx {
+                            triplets.push(Triplet::new(gx, gy, rest.weight * a[x] * a[y]));
+                        }
+                    }
+                }
+            }
+        }
+        for (i, q) in p.iter().enumerate() {
+            rhs[(i, 0)] += self.proximal * q[0];
+            rhs[(n + i, 0)] += self.proximal * q[1];
+        }
+        let matrix = SparseColMat::<usize, f64>::try_new_from_triplets(2 * n, 2 * n, &triplets).ok()?;
+        let llt = matrix.sp_cholesky(Side::Lower).ok()?;
+        llt.solve_in_place(rhs.as_mut());
+        let q: Vec<[f64; 2]> = (0..n).map(|i| [rhs[(i, 0)], rhs[(n + i, 0)]]).collect();
+        q.iter().flatten().all(|x| x.is_finite()).then_some(q)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testmesh::grid;
+    use crate::uvstats::analyse_uv;
+
+    #[test]
+    fn the_signed_svd_reconstructs_the_matrix() {
+        for j in [
+            [[1.0, 0.3], [-0.2, 2.0]],
+            [[0.5, -1.5], [2.0, 0.1]],
+            [[1.0, 0.0], [0.0, -1.0]],
+            [[0.0, 0.0], [0.0, 0.0]],
+        ] {
+            let (phi, s1, s2, theta) = svd2(j);
+            let m = mul(mul(rot(phi), [[s1, 0.0], [0.0, s2]]), rot(theta));
+            for r in 0..2 {
+                for c in 0..2 {
+                    assert!((m[r][c] - j[r][c]).abs() < 1e-12, "{j:?} -> {m:?}");
+                }
+            }
+            let det = j[0][0] * j[1][1] - j[0][1] * j[1][0];
+            assert!(s1 >= s2.abs() - 1e-12 && (s2 < 0.0) == (det < -1e-15), "{j:?}: {s1} {s2}");
+        }
+    }
+
+    #[test]
+    fn smallest_positive_roots() {
+        assert_eq!(smallest_positive_root(0.0, 0.0, 1.0), f64::INFINITY);
+        assert!((smallest_positive_root(0.0, -2.0, 1.0) - 0.5).abs() < 1e-15);
+        assert!((smallest_positive_root(1.0, -3.0, 2.0) - 1.0).abs() < 1e-12);
+        assert_eq!(smallest_positive_root(1.0, 0.0, 1.0), f64::INFINITY);
+        assert_eq!(smallest_positive_root(1.0, 3.0, 2.0), f64::INFINITY);
+    }
+
+    #[test]
+    fn crossing_and_disjoint_segments() {
+        let p = [[0.0, 0.0], [1.0, 1.0], [0.0, 1.0], [1.0, 0.0], [2.0, 2.0], [3.0, 3.0]];
+        assert!(segments_cross([0, 1], [2, 3], &p));
+        assert!(!segments_cross([0, 1], [4, 5], &p));
+        assert!(!segments_cross([0, 1], [1, 2], &p), "neighbours share an endpoint");
+        let touching = [[0.0, 0.0], [2.0, 0.0], [1.0, 0.0], [1.0, 1.0]];
+        assert!(!segments_cross([0, 1], [2, 3], &touching), "an endpoint on a segment only touches");
+        let slit = [[0.0, 0.0], [2.0, 0.0], [0.5, 0.0], [1.5, 0.0]];
+        assert!(!segments_cross([0, 1], [2, 3], &slit), "coinciding sides only touch");
+    }
+
+    #[test]
+    fn a_flat_grid_is_a_disc_and_already_injective() {
+        let m = grid(6, |p| [(p[0] + 1.0) * 0.5, (p[1] + 1.0) * 0.5]);
+        let out = make_injective(&m, &InjectiveOptions::default()).unwrap();
+        let r = &out.report;
+        assert_eq!(
+            (r.islands_before, r.islands_after, r.not_injective_before, r.not_injective_after),
+            (1, 1, 0, 0)
+        );
+        assert_eq!((r.not_disc, r.repaired, r.reembedded, r.split), (0, 0, 0, 0));
+        assert!((r.energy_after - 4.0).abs() < 1e-6, "{r:?}");
+        let a = analyse_uv(&out.mesh, None, 256).unwrap();
+        assert_eq!((a.stats.flipped_faces, a.stats.overlapping_faces), (0, 0));
+    }
+
+    /// A strip of `n × m` quads on a surface `pos(s, t)` over `[0,1]²`, UVs `uv(s, t)`.
+    fn strip(
+        n: u32,
+        m: u32,
+        pos: impl Fn(f64, f64) -> [f64; 3],
+        uv: impl Fn(f64, f64) -> [f64; 2],
+    ) -> TriMesh {
+        let (mut positions, mut coords) = (Vec::new(), Vec::new());
+        for j in 0..=m {
+            for i in 0..=n {
+                let (s, t) = (i as f64 / n as f64, j as f64 / m as f64);
+                positions.push(pos(s, t).map(|x| x as f32));
+                coords.push(uv(s, t).map(|x| x as f32));
+            }
+        }
+        let id = |i: u32, j: u32| j * (n + 1) + i;
+        let mut triangles = Vec::new();
+        for j in 0..m {
+            for i in 0..n {
+                triangles.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+                triangles.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+        TriMesh { positions, uv: Some(UvLayer { coords, triangles: triangles.clone() }), triangles }
+    }
+
+    /// Flipped and overlapping faces of `mesh` after packing its islands apart.
+    fn flips_and_overlaps(mesh: &TriMesh) -> (usize, usize) {
+        let opts = crate::islands::IslandPacking { resolution: 1024, gutter: 2, rotate: true };
+        let packed = crate::islands::pack_islands(mesh, &opts).unwrap();
+        let a = analyse_uv(&packed.mesh, None, 1024).unwrap();
+        (a.stats.flipped_faces, a.stats.overlapping_faces)
+    }
+
+    #[test]
+    fn a_cut_cylinder_projected_onto_a_plane_refines_to_an_isometry() {
+        // Half a cylinder (a developable patch), projected along its depth: injective but squashed
+        // towards the sides.
+        let angle = |s: f64| 0.1 + 0.8 * std::f64::consts::PI * s;
+        let m =
+            strip(24, 12, |s, t| [angle(s).cos(), 2.0 * t, angle(s).sin()], |s, t| [angle(s).cos(), 2.0 * t]);
+        let out = make_injective(&m, &InjectiveOptions { tolerance: 1e-6, ..Default::default() }).unwrap();
+        let r = &out.report;
+        assert_eq!((r.not_injective_before, r.not_injective_after, r.reembedded, r.split), (0, 0, 0, 0));
+        assert!(r.energy_before > 4.5, "the projection is far from isometric: {r:?}");
+        assert!(r.energy_after < 4.0 + 1e-3, "{r:?}");
+        let p = crate::partuv::partuv_metrics(&out.mesh).unwrap();
+        assert!(p.angular_score > 0.999 && p.area_distortion < 1.01, "{p:?}");
+    }
+
+    #[test]
+    fn a_folded_corner_comes_out_fold_free() {
+        // One interior vertex pulled across its neighbours folds the faces round it.
+        let m = grid(8, |p| {
+            let uv = [(p[0] + 1.0) * 0.5, (p[1] + 1.0) * 0.5];
+            if (p[0] - 0.5).abs() < 1e-6 && (p[1] - 0.5).abs() < 1e-6 { [0.1, 0.2] } else { uv }
+        });
+        let before = analyse_uv(&m, None, 1024).unwrap().stats;
+        assert!(before.flipped_faces > 0 && before.overlapping_faces > 0, "{before:?}");
+        let out = make_injective(&m, &InjectiveOptions::default()).unwrap();
+        let r = &out.report;
+        assert_eq!((r.not_injective_before, r.not_injective_after, r.split), (1, 0, 0), "{r:?}");
+        assert_eq!((r.repaired, r.reembedded), (1, 0), "a fold inside the chart is mended in place: {r:?}");
+        assert_eq!(flips_and_overlaps(&out.mesh), (0, 0));
+        assert!(r.energy_after < 4.01, "a flat grid flattens isometrically: {r:?}");
+    }
+
+    #[test]
+    fn random_folds_never_survive() {
+        for seed in 1..=6u64 {
+            let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15);
+            let mut noise = move || {
+                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) as f32
+            };
+            let mut m = grid(10, |p| [(p[0] + 1.0) * 0.5, (p[1] + 1.0) * 0.5]);
+            for c in &mut m.uv.as_mut().unwrap().coords {
+                *c = [c[0] + 0.25 * noise(), c[1] + 0.25 * noise()];
+            }
+            let before = analyse_uv(&m, None, 1024).unwrap().stats;
+            assert!(before.flipped_faces > 10, "seed {seed}: {before:?}");
+            let out = make_injective(&m, &InjectiveOptions::default()).unwrap();
+            assert_eq!(out.report.not_injective_after, 0, "seed {seed}: {:?}", out.report);
+            assert_eq!(flips_and_overlaps(&out.mesh), (0, 0), "seed {seed}");
+        }
+    }
+
+    #[test]
+    fn a_chart_wrapping_round_a_tube_is_cut_and_flattened() {
+        // A closed tube (an annulus, not a disc) projected onto a plane: its back lies on its
+        // front, mirrored.
+        let n = 24;
+        let mut m = strip(
+            n,
+            6,
+            |s, t| {
+                let a = std::f64::consts::TAU * s;
+                [a.cos(), 2.0 * t, a.sin()]
+            },
+            |s, t| [(std::f64::consts::TAU * s).cos(), 2.0 * t],
+        );
+        // Weld the seam: the last column of vertices is the first.
+        for tri in m.triangles.iter_mut().chain(m.uv.as_mut().unwrap().triangles.iter_mut()) {
+            for v in tri.iter_mut() {
+                if *v % (n + 1) == n {
+                    *v -= n;
+                }
+            }
+        }
+        let before = analyse_uv(&m, None, 1024).unwrap().stats;
+        assert_eq!(before.charts, 1);
+        assert!(before.flipped_faces > 0 && before.overlapping_faces > 0, "{before:?}");
+        let out = make_injective(&m, &InjectiveOptions::default()).unwrap();
+        let r = &out.report;
+        assert_eq!((r.not_disc, r.not_injective_after), (1, 0), "{r:?}");
+        assert_eq!(
+            (r.islands_after, r.reembedded, r.split),
+            (1, 1, 0),
+            "cut open along a slit, one island: {r:?}"
+        );
+        assert_eq!(flips_and_overlaps(&out.mesh), (0, 0));
+        assert!(r.energy_after < 4.05, "each part of a tube is developable: {r:?}");
+    }
+
+    #[test]
+    fn a_strip_curled_onto_itself_is_opened() {
+        // A flat strip mapped to an annulus sector of 1.5 turns: no face flips, but the map
+        // covers the first half turn twice.
+        let m = strip(
+            60,
+            4,
+            |s, t| [6.0 * s, 0.4 * t, 0.0],
+            |s, t| {
+                let a = 1.5 * std::f64::consts::TAU * s;
+                let r = 1.0 + 0.4 * t;
+                [r * a.cos(), r * a.sin()]
+            },
+        );
+        let out = make_injective(&m, &InjectiveOptions::default()).unwrap();
+        let r = &out.report;
+        assert_eq!((r.not_injective_before, r.not_injective_after, r.reembedded), (1, 0, 1), "{r:?}");
+        assert_eq!(flips_and_overlaps(&out.mesh), (0, 0));
+        assert!(r.energy_after < 4.05, "a flat strip flattens isometrically: {r:?}");
+    }
+
+    #[test]
+    fn a_face_wound_against_its_neighbours_gets_an_island_of_its_own() {
+        let mut m = grid(6, |p| [(p[0] + 1.0) * 0.5, (p[1] + 1.0) * 0.5]);
+        m.triangles[20].swap(1, 2);
+        m.uv.as_mut().unwrap().triangles[20].swap(1, 2);
+        let before = analyse_uv(&m, None, 1024).unwrap().stats;
+        assert_eq!(before.flipped_faces, 1, "{before:?}");
+        let out = make_injective(&m, &InjectiveOptions::default()).unwrap();
+        let r = &out.report;
+        assert_eq!((r.not_injective_before, r.not_injective_after, r.not_disc), (1, 0, 1), "{r:?}");
+        assert_eq!(r.islands_after, 2, "{r:?}");
+        assert_eq!(flips_and_overlaps(&out.mesh), (0, 0));
+    }
+
+    #[test]
+    fn without_split_islands_stay_whole_and_a_disc_is_still_mended() {
+        let m = grid(8, |p| {
+            let uv = [(p[0] + 1.0) * 0.5, (p[1] + 1.0) * 0.5];
+            if (p[0] + 0.5).abs() < 1e-6 && (p[1] - 0.25).abs() < 1e-6 { [0.9, 0.9] } else { uv }
+        });
+        let before = analyse_uv(&m, None, 1024).unwrap().stats;
+        assert!(before.flipped_faces > 0, "{before:?}");
+        let opts = InjectiveOptions { split: false, ..Default::default() };
+        let out = make_injective(&m, &opts).unwrap();
+        let r = &out.report;
+        assert_eq!((r.islands_after, r.not_injective_after, r.split), (1, 0, 0), "{r:?}");
+        let a = analyse_uv(&out.mesh, None, 1024).unwrap().stats;
+        assert_eq!((a.flipped_faces, a.overlapping_faces), (0, 0), "{a:?}");
+    }
+}
