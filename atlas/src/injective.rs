@@ -115,18 +115,23 @@ pub const SPLIT_ENERGY: f64 = 4.5;
 /// Options of [`make_injective`].
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct InjectiveOptions {
-    /// SLIM rounds per island at most (default 30).
+    /// SLIM rounds per island at most (default 60).
     pub iterations: usize,
-    /// Relative energy decrease below which the rounds stop (default 1e-3).
+    /// Relative energy decrease below which the rounds stop (default 1e-4). Measured on Common
+    /// Shapes against 1e-3 / 30 rounds: mean Editability 0.9510 against 0.9470, the horse's
+    /// bake 16 s against 10 s; 1e-5 / 150 rounds gives 0.9529 for 39 s.
     pub tolerance: f64,
     /// Split islands that are neither injective nor discs (default true; the parts overlap until
     /// packed).
     pub split: bool,
+    /// Symmetric Dirichlet energy per unit area above which a re-embedded island is split
+    /// instead (default [`SPLIT_ENERGY`]).
+    pub split_energy: f64,
 }
 
 impl Default for InjectiveOptions {
     fn default() -> Self {
-        InjectiveOptions { iterations: 30, tolerance: 1e-3, split: true }
+        InjectiveOptions { iterations: 60, tolerance: 1e-4, split: true, split_energy: SPLIT_ENERGY }
     }
 }
 
@@ -305,7 +310,7 @@ impl Ctx<'_> {
         {
             let (q, rounds) = disc.slim(start, self.opts);
             let density = disc.energy(&q).map_or(f64::INFINITY, |e| e / disc.area3.max(f64::MIN_POSITIVE));
-            if !may_split || density <= SPLIT_ENERGY {
+            if !may_split || density <= self.opts.split_energy {
                 return self.push(disc, q, Start::Tutte, rounds, out, placement);
             }
         }

@@ -258,6 +258,13 @@ pub struct OutputConfig {
     /// adds no flipped face and does not lower the island's angular score. Off by default (the
     /// paper's bake); `nuvo unwrap` turns it on.
     pub refine: bool,
+    /// Make every baked island injective (not in the paper; `nuvo_atlas::injective`): no face
+    /// flipped, none over another. Folds are mended in place; an island that overlaps itself is
+    /// re-embedded as a disc and its distortion lowered (SLIM), or, where that distorts too much,
+    /// its overlapping faces are detached into islands of their own (only with `packing =
+    /// "islands"`, which places the new islands; with `"squares"` such an island keeps its UVs).
+    /// Off by default (the paper's bake); `nuvo unwrap` turns it on for clean meshes.
+    pub injective: bool,
     /// How the atlas is laid out: `"squares"` (default, the paper's: one square cell per chart) or
     /// `"islands"` (not in the paper; `nuvo_atlas::islands`: every UV island packed on its own at
     /// one texel density for the whole atlas, rotated to fit, with `gutter` texels between islands).
@@ -283,6 +290,7 @@ impl Default for OutputConfig {
             round_trip_tolerance: 0.0,
             untangle: false,
             refine: false,
+            injective: false,
             packing: Packing::Squares,
             eval_views: 16,
             eval_resolution: 800,
@@ -780,7 +788,7 @@ mod tests {
     #[test]
     fn packing_and_refinement_default_to_the_papers_bake_and_name_a_typo() {
         let c = from_str("c.toml", MINIMAL).unwrap().config;
-        assert_eq!((c.output.packing, c.output.refine), (Packing::Squares, false));
+        assert_eq!((c.output.packing, c.output.refine, c.output.injective), (Packing::Squares, false, false));
         let c = from_str("c.toml", &format!("{MINIMAL}[output]\npacking = \"islands\"\nrefine = true\n"))
             .unwrap();
         assert_eq!((c.config.output.packing, c.config.output.refine), (Packing::Islands, true));

@@ -107,7 +107,7 @@ pub struct LayoutSummary {
     pub packing: Packing,
     /// The refinement's report, when it ran.
     pub refine: Option<RefineReport>,
-    /// What making every island injective did (after the refinement, when it ran).
+    /// What making every island injective did (`output.injective`, after the refinement).
     pub injective: Option<InjectiveReport>,
     /// Islands packed, with `packing = "islands"`.
     pub islands: Option<usize>,
@@ -121,6 +121,8 @@ fn finish_layout(mesh: TriMesh, opts: &OutputConfig) -> Result<(TriMesh, LayoutS
         let refined = refine_islands(&mesh, &RefineOptions::default())?;
         mesh = refined.mesh;
         summary.refine = Some(refined.report);
+    }
+    if opts.injective {
         // Split parts lie on each other until packed, so only island packing may split.
         let split = opts.packing == Packing::Islands;
         let injective = make_injective(&mesh, &InjectiveOptions { split, ..Default::default() })?;
@@ -216,7 +218,7 @@ fn bake_and_measure(
     let (layout_mesh, finished) = finish_layout(baked.mesh, opts)?;
     let baked = nuvo_atlas::bake::Baked { mesh: layout_mesh, ..baked };
     // Refinement and packing move UVs: count flips and overlaps again on what is written.
-    let recount = (finished.refine.is_some() || finished.islands.is_some())
+    let recount = (finished.refine.is_some() || finished.injective.is_some() || finished.islands.is_some())
         .then(|| analyse_uv(&baked.mesh, Some(&baked.face_chart), opts.atlas_resolution))
         .transpose()?;
     let mut files = Vec::new();

@@ -234,7 +234,9 @@ pub fn recipe(r: &RecipeInput) -> String {
     let warm = (r.steps * 3 / 10).clamp(1, 300);
     let mut bake = String::from("refine = true\npacking = \"islands\"\n");
     if clean {
-        bake += "round_trip_tolerance = 0.1\nuntangle = true\n";
+        // Injectivity holds on clean meshes at a small cost in Editability; on marching-cubes
+        // meshes its new seams cost far more (BENCHMARKS.md, "Injective islands").
+        bake += "round_trip_tolerance = 0.1\nuntangle = true\ninjective = true\n";
     }
     let stop =
         r.stop_after_seconds.map(|s| format!("time_budget_minutes = {}\n", s / 60.0)).unwrap_or_default();
@@ -516,7 +518,7 @@ mod tests {
         };
         let clean = crate::config::from_str("clean", &recipe(&base)).unwrap().config;
         assert_eq!((clean.model.charts, clean.training.steps, clean.seed), (5, 900, 3));
-        assert!(clean.output.untangle && clean.output.round_trip_tolerance > 0.0);
+        assert!(clean.output.untangle && clean.output.round_trip_tolerance > 0.0 && clean.output.injective);
         assert_eq!(clean.training.time_budget_minutes, Some(1.5));
         assert_eq!(clean.warm_start.unwrap().steps, 270);
         let flipped = RecipeInput { flip_normals: true, ..base };
@@ -525,7 +527,8 @@ mod tests {
         assert!(!clean.geometry.options.contains_key("flip_normals"));
         let unruly = RecipeInput { sampling: SamplingMode::Visible, ..base };
         let c = crate::config::from_str("unruly", &recipe(&unruly)).unwrap().config;
-        assert!(!c.output.untangle && c.output.round_trip_tolerance == 0.0);
+        assert!(!c.output.untangle && c.output.round_trip_tolerance == 0.0 && !c.output.injective);
+        assert!(c.output.refine, "refinement holds everywhere");
         assert_eq!(c.geometry.options["sampling"].as_str(), Some("visible"));
         let grid = RecipeInput {
             kind: InputKind::Density,
