@@ -90,7 +90,7 @@ use serde::Serialize;
 
 use crate::error::AtlasError;
 use crate::refine::{Frame, area2, island_unknowns, write_back};
-use crate::uvstats::{degenerate_3d_faces, require_uv, uv_charts};
+use crate::uvstats::{degenerate_3d_faces, require_uv, uv_islands};
 use crate::vecmath::{norm, sub, v3};
 
 /// Weight of a 3-D-degenerate face's equilateral rest shape, relative to its area.
@@ -177,11 +177,8 @@ pub struct Injective {
 /// Errors: no UVs, an invalid mesh.
 pub fn make_injective(mesh: &TriMesh, opts: &InjectiveOptions) -> Result<Injective, AtlasError> {
     let uv = require_uv(mesh)?;
-    let (face_chart, count) = uv_charts(mesh, uv);
-    let mut members: Vec<Vec<u32>> = vec![Vec::new(); count];
-    for (f, &c) in face_chart.iter().enumerate() {
-        members[c as usize].push(f as u32);
-    }
+    let members = uv_islands(mesh, uv);
+    let count = members.len();
     let degenerate = degenerate_3d_faces(mesh);
     let ctx = Ctx { mesh, uv, degenerate: &degenerate, opts };
     let results: Vec<IslandResult> = members.par_iter().map(|faces| ctx.island(faces)).collect();
@@ -1131,7 +1128,7 @@ impl Patch {
         if good.is_empty() {
             return (bad, q);
         }
-        let mut grid = TriangleGrid::new(&good);
+        let mut grid = TriangleGrid::new(&good, mean_edge(&good));
         let mut queue: std::collections::VecDeque<u32> = std::collections::VecDeque::new();
         for (t, c) in self.live() {
             if bad[t] && c.iter().filter(|&&v| placed[v as usize]).count() >= 2 {
@@ -1170,7 +1167,9 @@ impl Patch {
                 }
                 _ => continue,
             };
-            if !is_positive(area2(tri)) || tri.iter().flatten().any(|x| !x.is_finite()) || grid.overlaps(tri)
+            if !is_positive(area2(tri))
+                || tri.iter().flatten().any(|x| !x.is_finite())
+                || !grid.overlapping(tri).is_empty()
             {
                 continue;
             }
@@ -1211,50 +1210,13 @@ impl Patch {
         if tris.is_empty() {
             return bad;
         }
-        let mean: f64 = tris
-            .iter()
-            .map(|(_, q)| {
-                (q[1][0] - q[0][0]).hypot(q[1][1] - q[0][1]) + (q[2][0] - q[0][0]).hypot(q[2][1] - q[0][1])
-            })
-            .sum::<f64>()
-            / (2 * tris.len()) as f64;
-        let cell = (2.0 * mean).max(f64::MIN_POSITIVE);
-        let key = |x: f64| (x / cell).floor() as i64;
-        let mut grid: HashMap<(i64, i64), Vec<u32>> = HashMap::new();
-        for (k, (t, q)) in tris.iter().enumerate() {
-            let xs = q.map(|v| v[0]);
-            let ys = q.map(|v| v[1]);
-            let (x0, x1) = (
-                key(xs.iter().copied().fold(f64::INFINITY, f64::min)),
-                key(xs.iter().copied().fold(f64::NEG_INFINITY, f64::max)),
-            );
-            let (y0, y1) = (
-                key(ys.iter().copied().fold(f64::INFINITY, f64::min)),
-                key(ys.iter().copied().fold(f64::NEG_INFINITY, f64::max)),
-            );
-            if (x1 - x0 + 1).saturating_mul(y1 - y0 + 1) > 64 * tris.len() as i64 {
-                // One triangle across the whole patch: test it against all.
-                for (o, (u, r)) in tris.iter().enumerate() {
-                    if o != k && triangles_overlap(*q, *r) {
-                        bad[*t] = true;
-                        bad[*u] = true;
-                    }
-                }
-                continue;
+        let mut grid = TriangleGrid::new(&tris[..0], mean_edge(&tris));
+        for (t, q) in &tris {
+            for o in grid.overlapping(*q) {
+                bad[*t] = true;
+                bad[tris[o as usize].0] = true;
             }
-            for x in x0..=x1 {
-                for y in y0..=y1 {
-                    let bucket = grid.entry((x, y)).or_default();
-                    for &o in bucket.iter() {
-                        let (u, r) = tris[o as usize];
-                        if triangles_overlap(*q, r) {
-                            bad[*t] = true;
-                            bad[u] = true;
-                        }
-                    }
-                    bucket.push(k as u32);
-                }
-            }
+            grid.insert(*q);
         }
         bad
     }
@@ -1426,33 +1388,44 @@ fn separate_fans(
     (corners, next as usize)
 }
 
-/// Triangles in a hashed uniform grid, for overlap queries while a part grows.
+/// The mean length of the first two edges of the triangles (1 when there are none).
+fn mean_edge(tris: &[(usize, [[f64; 2]; 3])]) -> f64 {
+    if tris.is_empty() {
+        return 1.0;
+    }
+    let sum: f64 = tris
+        .iter()
+        .map(|(_, q)| {
+            (q[1][0] - q[0][0]).hypot(q[1][1] - q[0][1]) + (q[2][0] - q[0][0]).hypot(q[2][1] - q[0][1])
+        })
+        .sum();
+    sum / (2 * tris.len()) as f64
+}
+
+/// Triangles in a hashed uniform grid (cells of twice a typical edge), for overlap queries.
+/// Triangles over more than [`TriangleGrid::MAX_CELLS`] cells are kept aside and tested against
+/// every query, and such a query tests everything, so the answers are exact.
 struct TriangleGrid {
     cell: f64,
     cells: HashMap<(i64, i64), Vec<u32>>,
+    big: Vec<u32>,
     tris: Vec<[[f64; 2]; 3]>,
 }
 
 impl TriangleGrid {
-    fn new(start: &[(usize, [[f64; 2]; 3])]) -> TriangleGrid {
-        let mean: f64 = start
-            .iter()
-            .map(|(_, q)| {
-                (q[1][0] - q[0][0]).hypot(q[1][1] - q[0][1]) + (q[2][0] - q[0][0]).hypot(q[2][1] - q[0][1])
-            })
-            .sum::<f64>()
-            / (2 * start.len().max(1)) as f64;
-        let mut g = TriangleGrid {
-            cell: (2.0 * mean).max(f64::MIN_POSITIVE),
-            cells: HashMap::new(),
-            tris: Vec::new(),
-        };
+    const MAX_CELLS: i64 = 4096;
+
+    /// A grid holding `start`, with cells of twice `edge`.
+    fn new(start: &[(usize, [[f64; 2]; 3])], edge: f64) -> TriangleGrid {
+        let cell = (2.0 * edge).max(f64::MIN_POSITIVE);
+        let mut g = TriangleGrid { cell, cells: HashMap::new(), big: Vec::new(), tris: Vec::new() };
         for (_, t) in start {
             g.insert(*t);
         }
         g
     }
 
+    /// The cells `[x0, x1, y0, y1]` a triangle's bounding box covers, `None` when too many.
     fn range(&self, t: [[f64; 2]; 3]) -> Option<[i64; 4]> {
         let key = |x: f64| (x / self.cell).floor() as i64;
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
@@ -1463,35 +1436,40 @@ impl TriangleGrid {
             }
         }
         let r = [key(lo[0]), key(hi[0]), key(lo[1]), key(hi[1])];
-        // A triangle over very many cells (far larger than its neighbours) is not indexed.
-        ((r[1] - r[0] + 1).saturating_mul(r[3] - r[2] + 1) <= 4096).then_some(r)
+        ((r[1] - r[0] + 1).saturating_mul(r[3] - r[2] + 1) <= Self::MAX_CELLS).then_some(r)
     }
 
     fn insert(&mut self, t: [[f64; 2]; 3]) {
         let id = self.tris.len() as u32;
         self.tris.push(t);
-        let Some([x0, x1, y0, y1]) = self.range(t) else { return };
-        for x in x0..=x1 {
-            for y in y0..=y1 {
-                self.cells.entry((x, y)).or_default().push(id);
+        match self.range(t) {
+            Some([x0, x1, y0, y1]) => {
+                for x in x0..=x1 {
+                    for y in y0..=y1 {
+                        self.cells.entry((x, y)).or_default().push(id);
+                    }
+                }
             }
+            None => self.big.push(id),
         }
     }
 
-    /// Whether `t` overlaps a stored triangle (a triangle too large to index is never found,
-    /// so [`Patch::is_injective`] checks the result again).
-    fn overlaps(&self, t: [[f64; 2]; 3]) -> bool {
-        let Some([x0, x1, y0, y1]) = self.range(t) else { return true };
+    /// The stored triangles that `t` overlaps ([`triangles_overlap`]), by insertion index; one
+    /// may be listed more than once.
+    fn overlapping(&self, t: [[f64; 2]; 3]) -> Vec<u32> {
+        let hit = |&i: &u32| triangles_overlap(t, self.tris[i as usize]);
+        let Some([x0, x1, y0, y1]) = self.range(t) else {
+            return (0..self.tris.len() as u32).filter(hit).collect();
+        };
+        let mut out: Vec<u32> = self.big.iter().copied().filter(hit).collect();
         for x in x0..=x1 {
             for y in y0..=y1 {
-                if let Some(ids) = self.cells.get(&(x, y))
-                    && ids.iter().any(|&i| triangles_overlap(t, self.tris[i as usize]))
-                {
-                    return true;
+                if let Some(ids) = self.cells.get(&(x, y)) {
+                    out.extend(ids.iter().copied().filter(hit));
                 }
             }
         }
-        false
+        out
     }
 }
 

@@ -85,7 +85,7 @@ use crate::error::AtlasError;
 use crate::metrics::abs_cos_tangents;
 use crate::partuv::partuv_metrics;
 use crate::uvstats::{
-    DEGENERATE_UV_AREA, Dsu, Orientation, degenerate_3d_faces, orientation, require_uv, uv_charts,
+    DEGENERATE_UV_AREA, Dsu, Orientation, degenerate_3d_faces, orientation, require_uv, uv_islands,
 };
 use crate::vecmath::{cross, dot, norm, sub, v3};
 
@@ -155,11 +155,8 @@ pub struct Refined {
 /// invalid mesh.
 pub fn refine_islands(mesh: &TriMesh, opts: &RefineOptions) -> Result<Refined, AtlasError> {
     let uv = require_uv(mesh)?;
-    let (face_chart, count) = uv_charts(mesh, uv);
-    let mut members: Vec<Vec<u32>> = vec![Vec::new(); count];
-    for (f, &c) in face_chart.iter().enumerate() {
-        members[c as usize].push(f as u32);
-    }
+    let members = uv_islands(mesh, uv);
+    let count = members.len();
     let degenerate = degenerate_3d_faces(mesh);
     let ctx = Context { mesh, uv, degenerate: &degenerate, opts };
     let outcomes: Vec<Outcome> = members.par_iter().map(|faces| ctx.island(faces)).collect();

@@ -146,6 +146,16 @@ pub fn uv_charts(mesh: &TriMesh, uv: &UvLayer) -> (Vec<u32>, usize) {
     charts_along(&EdgeUses::of(mesh), mesh, uv)
 }
 
+/// The faces of each island of [`uv_charts`], in island order, each list in face order.
+pub fn uv_islands(mesh: &TriMesh, uv: &UvLayer) -> Vec<Vec<u32>> {
+    let (face_chart, count) = uv_charts(mesh, uv);
+    let mut members: Vec<Vec<u32>> = vec![Vec::new(); count];
+    for (f, &c) in face_chart.iter().enumerate() {
+        members[c as usize].push(f as u32);
+    }
+    members
+}
+
 /// [`uv_charts`] on the mesh's edge uses.
 fn charts_along(edges: &EdgeUses, mesh: &TriMesh, uv: &UvLayer) -> (Vec<u32>, usize) {
     // Two uses of an edge join their faces when both ends have the same UVs in both faces.
