@@ -1076,16 +1076,20 @@ impl Patch {
                 }
             }
         }
-        let mut label: HashMap<u32, usize> = HashMap::new();
+        self.group(|t| if self.collapsed[t] { 0 } else { dsu.find(t as u32) })
+    }
+
+    /// The patch's faces grouped by `key(face index)`, groups in order of their first face.
+    fn group(&self, mut key: impl FnMut(usize) -> u32) -> Vec<Vec<u32>> {
+        let mut index: HashMap<u32, usize> = HashMap::new();
         let mut parts: Vec<Vec<u32>> = Vec::new();
         for t in 0..self.faces.len() {
-            let root = if self.collapsed[t] { 0 } else { dsu.find(t as u32) };
             let next = parts.len();
-            let l = *label.entry(root).or_insert(next);
-            if l == parts.len() {
+            let i = *index.entry(key(t)).or_insert(next);
+            if i == parts.len() {
                 parts.push(Vec::new());
             }
-            parts[l].push(self.faces[t]);
+            parts[i].push(self.faces[t]);
         }
         parts
     }
@@ -1242,18 +1246,7 @@ impl Patch {
                 }
             }
         }
-        let mut index: HashMap<u32, usize> = HashMap::new();
-        let mut parts: Vec<Vec<u32>> = Vec::new();
-        for t in 0..self.faces.len() {
-            let root = dsu.find(t as u32);
-            let next = parts.len();
-            let i = *index.entry(root).or_insert(next);
-            if i == parts.len() {
-                parts.push(Vec::new());
-            }
-            parts[i].push(self.faces[t]);
-        }
-        parts
+        self.group(|t| dsu.find(t as u32))
     }
 
     /// Two parts of connected faces grown from two far-apart faces (module docs).
