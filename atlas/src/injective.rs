@@ -89,7 +89,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::error::AtlasError;
-use crate::refine::{Frame, area2, island_unknowns, write_back};
+use crate::refine::{Frame, area2, centroid_of, island_unknowns, write_back};
 use crate::uvstats::{degenerate_3d_faces, require_uv, uv_islands};
 use crate::vecmath::{norm, sub, v3};
 
@@ -404,40 +404,24 @@ struct Placement {
 
 impl Placement {
     fn of(ctx: &Ctx, faces: &[u32], patch: &Patch) -> Placement {
-        let (mut auv, mut c) = (0.0, [0.0f64; 2]);
-        let mut mean = [0.0f64; 2];
-        for &f in faces {
-            let t = ctx.uv.triangles[f as usize].map(|i| ctx.uv.coords[i as usize].map(|x| x as f64));
-            let a = 0.5 * area2(t).abs();
-            auv += a;
-            for q in t {
-                c = [c[0] + a * q[0] / 3.0, c[1] + a * q[1] / 3.0];
-                mean = [mean[0] + q[0] / (3 * faces.len()) as f64, mean[1] + q[1] / (3 * faces.len()) as f64];
-            }
-        }
-        let centre = if auv > 0.0 { [c[0] / auv, c[1] / auv] } else { mean };
+        let tris: Vec<[[f64; 2]; 3]> = faces
+            .iter()
+            .map(|&f| ctx.uv.triangles[f as usize].map(|i| ctx.uv.coords[i as usize].map(|x| x as f64)))
+            .collect();
+        let auv: f64 = tris.iter().map(|&t| 0.5 * area2(t).abs()).sum();
         let density = if auv > 0.0 && patch.area3 > 0.0 { (auv / patch.area3).sqrt() } else { 1.0 };
-        Placement { density, centre }
+        Placement { density, centre: centroid_of(&tris) }
     }
 
     /// The patch's corners at working positions `p`, scaled and centred (module docs), in `f32`;
     /// `None` when not finite.
     fn place(&self, patch: &Patch, p: &[[f64; 2]]) -> Option<Vec<[f32; 2]>> {
-        let (mut w, mut c) = (0.0, [0.0f64; 2]);
-        for t in &patch.corners {
-            let q = t.map(|i| p[i as usize]);
-            let a = area2(q).abs();
-            w += a;
-            for v in q {
-                c = [c[0] + a * v[0] / 3.0, c[1] + a * v[1] / 3.0];
-            }
-        }
-        let c = if w > 0.0 { [c[0] / w, c[1] / w] } else { [0.0, 0.0] };
+        let tris: Vec<[[f64; 2]; 3]> = patch.corners.iter().map(|t| t.map(|i| p[i as usize])).collect();
+        let c = centroid_of(&tris);
         let s = self.density;
-        let out: Vec<[f32; 2]> = patch
-            .corners
+        let out: Vec<[f32; 2]> = tris
             .iter()
-            .flat_map(|t| t.map(|i| p[i as usize]))
+            .flatten()
             .map(|q| {
                 [(self.centre[0] + s * (q[0] - c[0])) as f32, (self.centre[1] + s * (q[1] - c[1])) as f32]
             })

@@ -647,7 +647,7 @@ impl Anderson {
 
 /// The area-weighted centroid of the UV triangles (|area| weights), or the mean of the corners
 /// when the total area is zero.
-fn centroid_of(tris: &[[[f64; 2]; 3]]) -> [f64; 2] {
+pub(crate) fn centroid_of(tris: &[[[f64; 2]; 3]]) -> [f64; 2] {
     let (mut w, mut s, mut m) = (0.0, [0.0f64; 2], [0.0f64; 2]);
     for t in tris {
         let a = area2(*t).abs();
