@@ -57,6 +57,17 @@
 //!   skyline bottom-left packer (three orders) 0.502 / 0.532 and 0.515 / 0.617; `binpack2d`
 //!   Guillotine 0.527 / 0.542; `rectangle-pack` 0.4 0.574 / 0.582 on spot (too slow for the
 //!   bunny); `etagere` 0.3 shelves 0.344 / 0.365. So no crate is needed.
+//! - **Shapes**: rectangles waste what an island leaves empty in its bounding rectangle (an L,
+//!   a long limb turned at an angle, a one-chart relief longer than wide). Up to
+//!   [`SHAPES_UP_TO`] islands the islands are therefore also packed by their shapes (the
+//!   [`shapes`] module: the texels each face touches, placed on a bitmap of the atlas so that no
+//!   texel comes within `gutter` of another island's, turned by multiples of 45° after the
+//!   minimum-area rotation), by bisection on `scale` from the rectangles' scale upwards (to 2e-4
+//!   relative), and the packing with the larger scale is kept. The gutter then holds between
+//!   the texels the islands touch rather than between their cells, and each island keeps
+//!   `floor(gutter / 2)` texels free at the low side of each axis and `ceil(gutter / 2)` at the
+//!   high side. Measured in BENCHMARKS.md ("Shape packing"): spot's own 13 charts 0.619 → 0.694
+//!   at 1024² (gutter 2).
 //! - **Efficiency**: the summed unsigned UV area of all faces in the output (over the unit
 //!   square's area 1), as [`crate::partuv`] measures packing efficiency.
 //!
@@ -65,11 +76,16 @@
 
 use std::collections::HashMap;
 
+use rayon::prelude::*;
+
 use nuvo_geometry::{TriMesh, UvLayer};
 
 use crate::error::AtlasError;
 use crate::uvstats::{DEGENERATE_AREA_REL, face_uv_area2, require_uv, uv_charts};
 use crate::vecmath::{cross, norm, sub, v3};
+
+mod shapes;
+use shapes::ShapePlaced;
 
 /// Largest atlas side [`pack_islands`] accepts, in texels.
 pub const MAX_RESOLUTION: u32 = 1 << 16;
@@ -131,7 +147,7 @@ pub fn pack_islands(mesh: &TriMesh, opts: &IslandPacking) -> Result<PackedIsland
     }
     let (island_of_face, n) = uv_charts(mesh, uv);
     let layout = Layout::of(mesh, uv, &island_of_face, n, rotate);
-    let (scale, packing) = best_scale(&layout.islands, res, gutter, rotate).ok_or_else(|| {
+    let (rect_scale, rects) = best_scale(&layout.islands, res, gutter, rotate).ok_or_else(|| {
         AtlasError::invalid(
             "island packing",
             format!(
@@ -140,12 +156,25 @@ pub fn pack_islands(mesh: &TriMesh, opts: &IslandPacking) -> Result<PackedIsland
             ),
         )
     })?;
+    let shaped = if n <= SHAPES_UP_TO && rect_scale > 0.0 {
+        best_shapes(&layout.islands, res, gutter, rotate, rect_scale).filter(|(s, _)| *s > rect_scale)
+    } else {
+        None
+    };
+    let (scale, arrangement) = match shaped {
+        Some((scale, placed)) => (scale, Arrangement::Shapes(placed)),
+        None => (rect_scale, Arrangement::Rects(rects)),
+    };
     let coords: Vec<[f32; 2]> = layout
         .coords
         .iter()
         .map(|&(island, old)| {
             let i = island as usize;
-            layout.islands[i].place(uv.coords[old as usize], scale, res, gutter, &packing.cells[i])
+            let (isl, p) = (&layout.islands[i], uv.coords[old as usize]);
+            match &arrangement {
+                Arrangement::Rects(packing) => isl.place(p, scale, res, gutter, &packing.cells[i]),
+                Arrangement::Shapes(placed) => placed[i].place(isl, p, isl.texels_per_unit(scale, res), res),
+            }
         })
         .collect();
     let new_uv = UvLayer { coords, triangles: layout.triangles };
@@ -180,7 +209,8 @@ impl Layout {
         let mut members: Vec<Vec<u32>> = vec![Vec::new(); n];
         let mut area_uv = vec![0.0f64; n];
         let mut area_3d = vec![0.0f64; n];
-        let triangles = uv
+        let mut metrics: Vec<Vec<[f64; 3]>> = vec![Vec::new(); n];
+        let triangles: Vec<[u32; 3]> = uv
             .triangles
             .iter()
             .enumerate()
@@ -189,6 +219,9 @@ impl Layout {
                 area_uv[i as usize] += face_uv_area2(uv, f).abs() * 0.5;
                 let [a, b, c] = mesh.corners(f).map(v3);
                 area_3d[i as usize] += 0.5 * norm(cross(sub(b, a), sub(c, a)));
+                if let Some(g) = face_metric([a, b, c], t.map(|j| uv.coords[j as usize])) {
+                    metrics[i as usize].push(g);
+                }
                 t.map(|old| {
                     *index.entry((i, old)).or_insert_with(|| {
                         coords.push((i, old));
@@ -201,12 +234,26 @@ impl Layout {
         let eps_3d =
             DEGENERATE_AREA_REL * mesh.bounds().map_or(0.0, |b| norm(sub(v3(b.max), v3(b.min))).powi(2));
         let eps_uv = DEGENERATE_AREA_REL * uv_square_side(uv).powi(2);
+        // Each island's faces in its own numbering of its coordinates (the order of `members`).
+        let mut local = Vec::with_capacity(coords.len());
+        let mut count = vec![0u32; n];
+        for &(i, _) in &coords {
+            local.push(count[i as usize]);
+            count[i as usize] += 1;
+        }
+        let mut tris: Vec<Vec<[u32; 3]>> = vec![Vec::new(); n];
+        for (f, t) in triangles.iter().enumerate() {
+            tris[island_of_face[f] as usize].push(t.map(|j: u32| local[j as usize]));
+        }
         let islands = (0..n)
-            .map(|i| {
+            .into_par_iter()
+            .zip(tris)
+            .zip(metrics)
+            .map(|((i, tris), metric)| {
                 let points: Vec<[f64; 2]> =
                     members[i].iter().map(|&c| uv.coords[c as usize].map(|x| x as f64)).collect();
                 let degenerate = !(area_3d[i] > eps_3d && area_uv[i] > eps_uv);
-                Island::new(&points, area_uv[i], area_3d[i], degenerate, rotate)
+                Island::new(&points, tris, &metric, area_uv[i], area_3d[i], degenerate, rotate)
             })
             .collect();
         Self { islands, coords, triangles }
@@ -225,6 +272,7 @@ fn uv_square_side(uv: &UvLayer) -> f64 {
     (hi[0] - lo[0]).max(hi[1] - lo[1]).max(0.0)
 }
 
+#[cfg_attr(test, derive(Clone))]
 /// One island's fixed frame: its rotation, its bounding rectangle in that frame and how its size
 /// grows with the atlas scale.
 struct Island {
@@ -238,14 +286,38 @@ struct Island {
     /// or, for a degenerate island, texels per input UV unit (fixed).
     growth: f64,
     degenerate: bool,
+    /// Its 3-D area.
+    area_3d: f64,
+    /// The island's coordinates turned by `rot` (input UV units), in the island's own numbering.
+    points: Vec<[f64; 2]>,
+    /// Its faces in that numbering.
+    tris: Vec<[u32; 3]>,
+    /// Whether a further 45° turn leaves its shear (mean |cos(T, B)|) within [`TURN_SHEAR`]:
+    /// then the shape packer may lay it along a diagonal.
+    diagonal: bool,
 }
 
 impl Island {
-    fn new(points: &[[f64; 2]], area_uv: f64, area_3d: f64, degenerate: bool, rotate: bool) -> Self {
-        let rot = if rotate { min_area_rotation(&convex_hull(points)) } else { [1.0, 0.0] };
+    fn new(
+        points: &[[f64; 2]],
+        tris: Vec<[u32; 3]>,
+        metric: &[[f64; 3]],
+        area_uv: f64,
+        area_3d: f64,
+        degenerate: bool,
+        rotate: bool,
+    ) -> Self {
+        let (rot, diagonal) = if rotate {
+            let rect = min_area_rotation(&convex_hull(points));
+            let rot = least_shear_rotation(metric, rect);
+            let diagonal = shear(metric, compose(rot, shapes::turn(1))) <= shear(metric, rot) + TURN_SHEAR;
+            (rot, diagonal)
+        } else {
+            ([1.0, 0.0], false)
+        };
+        let points: Vec<[f64; 2]> = points.iter().map(|&p| rotated(p, rot)).collect();
         let (mut min, mut max) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for &p in points {
-            let q = rotated(p, rot);
+        for &q in &points {
             for k in 0..2 {
                 min[k] = min[k].min(q[k]);
                 max[k] = max[k].max(q[k]);
@@ -258,7 +330,7 @@ impl Island {
         } else {
             (area_3d / area_uv).sqrt()
         };
-        Self { rot, min, extent, growth, degenerate }
+        Self { rot, min, extent, growth, degenerate, area_3d, points, tris, diagonal }
     }
 
     /// Texels per input UV unit at atlas `scale` and `res`.
@@ -297,6 +369,95 @@ impl Island {
         let r = res as f64;
         [((left + q[0]) / r).clamp(0.0, 1.0) as f32, ((bottom + q[1]) / r).clamp(0.0, 1.0) as f32]
     }
+}
+
+/// How much a turn must lower an island's mean |cos(T, B)| to replace its minimum-area rotation,
+/// and how much a further 45° turn may raise it for the shape packer to use that: below this,
+/// the angular score gains or loses less than the tighter packing is worth.
+const TURN_SHEAR: f64 = 5e-4;
+
+/// The metric `[T·T, T·B, B·B]` of a face's affine UV→3-D map, `T = ∂p/∂u`, `B = ∂p/∂v`, up to
+/// the common factor `1/det²` (which |cos(T, B)| ignores); `None` when the face is degenerate in
+/// 3-D or so thin in UV (`|det| ≤ 1e-6 · (|e₁|² + |e₂|²)`) that its axes mean nothing.
+fn face_metric(p: [[f64; 3]; 3], t: [[f32; 2]; 3]) -> Option<[f64; 3]> {
+    let (e1, e2) = (sub(p[1], p[0]), sub(p[2], p[0]));
+    let d = |k: usize, c: usize| t[k][c] as f64 - t[0][c] as f64;
+    let (du1, dv1, du2, dv2) = (d(1, 0), d(1, 1), d(2, 0), d(2, 1));
+    let det = du1 * dv2 - du2 * dv1;
+    if det.abs() <= 1e-6 * (du1 * du1 + dv1 * dv1 + du2 * du2 + dv2 * dv2) {
+        return None;
+    }
+    let tt = [0, 1, 2].map(|k| e1[k] * dv2 - e2[k] * dv1);
+    let bt = [0, 1, 2].map(|k| e2[k] * du1 - e1[k] * du2);
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let g = [dot(tt, tt), dot(tt, bt), dot(bt, bt)];
+    (g[0] > 0.0 && g[2] > 0.0 && g.iter().all(|x| x.is_finite())).then_some(g)
+}
+
+/// Mean |cos(T, B)| of faces with metrics `metric` once their UVs are turned by `rot`
+/// (`u' = R u`, so `G' = R G Rᵀ`); 0 for no face.
+fn shear(metric: &[[f64; 3]], rot: [f64; 2]) -> f64 {
+    if metric.is_empty() {
+        return 0.0;
+    }
+    let [c, s] = rot;
+    let sum: f64 = metric
+        .iter()
+        .map(|&[g11, g12, g22]| {
+            let a = c * c * g11 - 2.0 * c * s * g12 + s * s * g22;
+            let b = s * s * g11 + 2.0 * c * s * g12 + c * c * g22;
+            let off = c * s * (g11 - g22) + (c * c - s * s) * g12;
+            off.abs() / (a * b).sqrt().max(f64::MIN_POSITIVE)
+        })
+        .sum();
+    sum / metric.len() as f64
+}
+
+/// The turn that makes the island's texture axes shear least on the surface: the angle in
+/// `[0°, 90°)` minimising [`shear`] (0.5° grid, then golden-section search within the best grid
+/// cell), or `fallback` unless that is lower than `fallback`'s by more than [`TURN_SHEAR`].
+///
+/// Why: PartUV's angular score and the paper's Conformal measure the angle between `T` and `B`,
+/// which for a map that is not exactly conformal depends on how the island is turned in the
+/// atlas (a quarter turn only swaps them). Turning each island so that its map's stretch runs
+/// along the texture axes makes a checker's squares rectangles on the surface instead of
+/// parallelograms; on the Common Shapes atlases it raises the mean angular score by ~0.003.
+fn least_shear_rotation(metric: &[[f64; 3]], fallback: [f64; 2]) -> [f64; 2] {
+    let at = |deg: f64| {
+        let r = deg.to_radians();
+        [r.cos(), r.sin()]
+    };
+    let f = |deg: f64| shear(metric, at(deg));
+    let step = 0.5;
+    let (mut best, mut best_f) = (0.0, f(0.0));
+    for k in 1..180 {
+        let v = f(k as f64 * step);
+        if v < best_f {
+            (best, best_f) = (k as f64 * step, v);
+        }
+    }
+    let golden = 0.5 * (5f64.sqrt() - 1.0);
+    let (mut a, mut b) = (best - step, best + step);
+    for _ in 0..24 {
+        let (x1, x2) = (b - golden * (b - a), a + golden * (b - a));
+        if f(x1) < f(x2) { b = x2 } else { a = x1 }
+    }
+    let mid = 0.5 * (a + b);
+    if f(mid) < best_f {
+        (best, best_f) = (mid, f(mid));
+    }
+    if best_f < shear(metric, fallback) - TURN_SHEAR {
+        // The same axes, turned by the quarter turn that brings the angle nearest to zero.
+        let deg = best - 90.0 * (best / 90.0).round();
+        at(deg)
+    } else {
+        fallback
+    }
+}
+
+/// The turn `b` after `a`, as `(cos, sin)`.
+fn compose(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
+    [a[0] * b[0] - a[1] * b[1], a[0] * b[1] + a[1] * b[0]]
 }
 
 /// `p` rotated by the angle whose `(cos, sin)` is `rot`.
@@ -446,6 +607,68 @@ fn best_scale(islands: &[Island], res: u32, gutter: u32, rotate: bool) -> Option
         Some(p) => Some((lo, p)),
         None => try_cells(&lo_cells).map(|p| (lo, p)),
     }
+}
+
+/// How the islands were laid out: by their bounding rectangles or by their shapes.
+enum Arrangement {
+    Rects(Packing),
+    Shapes(Vec<ShapePlaced>),
+}
+
+/// Up to this many islands their shapes are packed too ([`shapes`]), and the packing of the
+/// larger scale is kept. Beyond, only rectangles: the shape search's cost grows with the islands
+/// already placed (measured in BENCHMARKS.md, "Shape packing").
+pub const SHAPES_UP_TO: usize = 500;
+
+/// The largest atlas scale found, by bisection from `from` (to 2e-4 relative), at which the
+/// islands' shapes pack ([`shapes::pack_shapes`], islands by decreasing 3-D area, else by
+/// decreasing longest side), with that packing; `None` when they do not pack even at `from`.
+fn best_shapes(
+    islands: &[Island],
+    res: u32,
+    gutter: u32,
+    rotate: bool,
+    from: f64,
+) -> Option<(f64, Vec<ShapePlaced>)> {
+    let by_area = {
+        let mut o: Vec<usize> = (0..islands.len()).collect();
+        let area = |i: usize| if islands[i].degenerate { -1.0 } else { islands[i].area_3d };
+        o.sort_by(|&a, &b| area(b).total_cmp(&area(a)).then(a.cmp(&b)));
+        o
+    };
+    let by_side = {
+        let mut o: Vec<usize> = (0..islands.len()).collect();
+        let side = |i: usize| {
+            let isl = &islands[i];
+            if isl.degenerate { -1.0 } else { isl.growth * isl.extent[0].max(isl.extent[1]) }
+        };
+        o.sort_by(|&a, &b| side(b).total_cmp(&side(a)).then(a.cmp(&b)));
+        o
+    };
+    let trial = |scale: f64| {
+        let tpu = |i: &Island| i.texels_per_unit(scale, res);
+        shapes::pack_shapes(islands, &by_area, tpu, res, gutter, rotate)
+            .or_else(|| shapes::pack_shapes(islands, &by_side, tpu, res, gutter, rotate))
+    };
+    let mut best = (from, trial(from)?);
+    // Every face area at once cannot exceed the square: the scale at which it would fill it.
+    let area: f64 = islands.iter().filter(|i| !i.degenerate).map(|i| i.area_3d).sum();
+    if area <= 0.0 {
+        return Some(best);
+    }
+    let mut hi = 1.0 / area.sqrt();
+    let mut lo = from;
+    while hi - lo > 2e-4 * hi {
+        let mid = 0.5 * (lo + hi);
+        match trial(mid) {
+            Some(p) => {
+                lo = mid;
+                best = (mid, p);
+            }
+            None => hi = mid,
+        }
+    }
+    Some(best)
 }
 
 // ---- The rectangle packer -------------------------------------------------------------------

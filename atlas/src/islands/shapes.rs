@@ -1,0 +1,433 @@
+//! Packing islands by their shapes: every island is rasterised into the texels it touches (its
+//! *footprint*) and placed on a bitmap of the atlas where its footprint meets no texel within
+//! `gutter` of another island's, so islands interlock (an L nests in another L's corner, a long
+//! island lies along the diagonal) where their bounding rectangles could not. This is how xatlas
+//! packs charts (`PackOptions::bruteForce`), with the search made fast by jumping over occupied
+//! runs instead of testing every position.
+//!
+//! Definitions (exact):
+//! - **Orientations**: with `rotate`, each island is tried turned by quarter turns after its own
+//!   rotation (the parent module's), and by the odd multiples of 45° in between when that costs
+//!   its texture axes (almost) no shear (`Island::diagonal`); without, as it is. Quarter turns are
+//!   exact coordinate swaps and keep |cos(T, B)| of every face. Degenerate islands (one texel, the
+//!   parent module's rule) take orientation 0.
+//! - **Footprint** of an island in one orientation at `t` texels per input UV unit: its points are
+//!   `q = t · R(p)` shifted so that their bounding box starts at texel corner `(0, 0)`; a texel
+//!   `[x, x+1] × [y, y+1]` is in the footprint when a face of the island (its closed triangle)
+//!   meets the open texel square, i.e. the triangle's cut with the closed row slab `[y, y+1]`
+//!   spans beyond `x` and short of `x + 1`; a cut that is a single column or point takes the texel
+//!   it lies in. So every texel any face covers any part of is in it (bilinear filtering reads
+//!   those, and their neighbours, which the gutter covers). Stored per row as maximal runs.
+//! - **Occupancy**: a bitmap of the `side²` atlas. The texels in the border strips (`floor(gutter/2)`
+//!   at the low side of each axis, `ceil(gutter/2)` at the high side) start occupied; placing an
+//!   island marks its footprint dilated by `gutter` texels in both axes (a `(2·gutter+1)²` square
+//!   round each texel). A footprint fits at `(x, y)` when none of its texels is occupied. Hence
+//!   between the texels of two islands there are at least `gutter` free texels in `x` or in `y`
+//!   (Chebyshev distance `> gutter`), and each island keeps the border strips free.
+//! - **Placement**: islands in the given order; each goes, over its orientations, to the position
+//!   whose top row `y + h` is lowest, then whose `x` is least, then the first orientation; within
+//!   one orientation the first fit scanning rows from `y = 0` and columns from `x = 0`. A failed
+//!   test at a run of a footprint row jumps `x` past the occupied run that blocked it, so a row
+//!   costs one test per occupied run it crosses, not one per texel.
+//!
+//! Deterministic: orientations are searched in parallel (rayon) but chosen by the fixed order
+//! above, islands are placed sequentially.
+
+use rayon::prelude::*;
+
+use super::{Island, rotated};
+
+/// One island's footprint in one orientation at one scale.
+#[derive(Clone, Debug)]
+pub(super) struct Footprint {
+    /// Width and height in texels (at least 1 each).
+    pub w: u32,
+    pub h: u32,
+    /// Per row (bottom to top), the inclusive column ranges `(a, b)` of its texels, in order.
+    pub rows: Vec<Vec<(u32, u32)>>,
+    /// Added to `t · R(p)` to give the point's texel coordinates in the footprint.
+    pub shift: [f64; 2],
+    /// The rotation `R` applied after the island's own rotation, as `(cos, sin)`.
+    pub turn: [f64; 2],
+}
+
+/// Where [`pack_shapes`] put an island: its footprint's lower-left texel and its orientation.
+#[derive(Clone, Debug)]
+pub(super) struct ShapePlaced {
+    pub x: u32,
+    pub y: u32,
+    pub footprint: Footprint,
+}
+
+impl ShapePlaced {
+    /// The atlas UV (in `[0,1]²`) of the input UV `p` of `island`, at `t` texels per input unit.
+    pub fn place(&self, island: &Island, p: [f32; 2], t: f64, side: u32) -> [f32; 2] {
+        let q = rotated(rotated(p.map(|x| x as f64), island.rot), self.footprint.turn);
+        let s = side as f64;
+        let at = [self.x as f64, self.y as f64];
+        [0, 1].map(|k| ((at[k] + t * q[k] + self.footprint.shift[k]) / s).clamp(0.0, 1.0) as f32)
+    }
+}
+
+/// `(cos, sin)` of `k · 45°`, exact at multiples of 90°.
+pub(super) fn turn(k: u32) -> [f64; 2] {
+    let h = std::f64::consts::FRAC_1_SQRT_2;
+    [[1.0, 0.0], [h, h], [0.0, 1.0], [-h, h], [-1.0, 0.0], [-h, -h], [0.0, -1.0], [h, -h]][(k % 8) as usize]
+}
+
+/// The orientations tried for `island` (module docs), as multiples of 45°.
+fn orientations(island: &Island, rotate: bool) -> Vec<u32> {
+    match (rotate && !island.degenerate, island.diagonal) {
+        (false, _) => vec![0],
+        (true, false) => vec![0, 2, 4, 6],
+        (true, true) => (0..8).collect(),
+    }
+}
+
+/// The footprint of `island` turned by `k · 45°` at `t` texels per input unit (module docs).
+pub(super) fn footprint(island: &Island, k: u32, t: f64) -> Footprint {
+    let r = turn(k);
+    let q: Vec<[f64; 2]> =
+        island.points.iter().map(|&p| rotated(p, r)).map(|p| [p[0] * t, p[1] * t]).collect();
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in &q {
+        for k in 0..2 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    if q.is_empty() {
+        (lo, hi) = ([0.0; 2], [0.0; 2]);
+    }
+    let shift = [-lo[0], -lo[1]];
+    let size = [hi[0] - lo[0], hi[1] - lo[1]];
+    let cells = size.map(|s| (s.ceil() as u32).max(1));
+    let (w, h) = (cells[0], cells[1]);
+    let words = (w as usize).div_ceil(64);
+    let mut mask = vec![0u64; words * h as usize];
+    let local = |p: [f64; 2]| [p[0] + shift[0], p[1] + shift[1]];
+    let mut mark = |row: u32, a: u32, b: u32| {
+        let base = row as usize * words;
+        for x in a..=b {
+            mask[base + x as usize / 64] |= 1 << (x % 64);
+        }
+    };
+    let tris = island.tris.iter().map(|t| t.map(|i| local(q[i as usize])));
+    let tris: Box<dyn Iterator<Item = [[f64; 2]; 3]>> = if island.tris.is_empty() && !q.is_empty() {
+        Box::new(std::iter::once([local(q[0]); 3]))
+    } else {
+        Box::new(tris)
+    };
+    for tri in tris {
+        let ys = tri.map(|p| p[1]);
+        let (y0, y1) = (
+            ys.iter().copied().fold(f64::INFINITY, f64::min),
+            ys.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+        );
+        let first = (y0.floor().max(0.0) as u32).min(h - 1);
+        let last = ((y1.ceil() as u32).saturating_sub(1)).max(first).min(h - 1);
+        for row in first..=last {
+            let Some((x0, x1)) = slab_span(&tri, row as f64, row as f64 + 1.0) else { continue };
+            let a = (x0.floor().max(0.0) as u32).min(w - 1);
+            let b = ((x1.ceil() as u32).saturating_sub(1)).max(a).min(w - 1);
+            mark(row, a, b);
+        }
+    }
+    let rows = (0..h as usize).map(|r| runs(&mask[r * words..(r + 1) * words], w)).collect();
+    Footprint { w, h, rows, shift, turn: r }
+}
+
+/// The `x` extent of the closed triangle `tri` cut by the closed slab `y0 ≤ y ≤ y1`, `None` when
+/// they do not meet.
+fn slab_span(tri: &[[f64; 2]; 3], y0: f64, y1: f64) -> Option<(f64, f64)> {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    let mut take = |x: f64| {
+        lo = lo.min(x);
+        hi = hi.max(x);
+    };
+    for k in 0..3 {
+        let (p, q) = (tri[k], tri[(k + 1) % 3]);
+        if (y0..=y1).contains(&p[1]) {
+            take(p[0]);
+        }
+        // Where the edge crosses either slab line strictly between its ends.
+        for y in [y0, y1] {
+            if (p[1] - y) * (q[1] - y) < 0.0 {
+                take(p[0] + (q[0] - p[0]) * (y - p[1]) / (q[1] - p[1]));
+            }
+        }
+    }
+    (lo <= hi).then_some((lo, hi))
+}
+
+/// Maximal runs of set bits among the first `w` of `row`, as inclusive `(a, b)`.
+fn runs(row: &[u64], w: u32) -> Vec<(u32, u32)> {
+    let mut out = Vec::new();
+    let mut x = 0;
+    while x < w {
+        let a = next(row, x, w, true);
+        if a >= w {
+            break;
+        }
+        let b = next(row, a, w, false);
+        out.push((a, b - 1));
+        x = b;
+    }
+    out
+}
+
+/// The first `x' ≥ x` (below `w`) whose bit is `set`, or `w`.
+fn next(row: &[u64], x: u32, w: u32, set: bool) -> u32 {
+    let mut i = x as usize / 64;
+    if i >= row.len() {
+        return w;
+    }
+    let mut word = if set { row[i] } else { !row[i] } & (!0u64 << (x % 64));
+    loop {
+        if word != 0 {
+            return (i as u32 * 64 + word.trailing_zeros()).min(w);
+        }
+        i += 1;
+        if i >= row.len() {
+            return w;
+        }
+        word = if set { row[i] } else { !row[i] };
+    }
+}
+
+/// The atlas bitmap: one bit per texel, set where the texel is occupied (module docs).
+struct Occupancy {
+    side: u32,
+    words: usize,
+    bits: Vec<u64>,
+    /// Per row, its longest run of free texels: a row too short for a footprint row is skipped
+    /// without a test.
+    longest_free: Vec<u32>,
+}
+
+impl Occupancy {
+    fn new(side: u32, gutter: u32) -> Self {
+        let words = (side as usize).div_ceil(64);
+        let mut o = Self {
+            side,
+            words,
+            bits: vec![0; words * side as usize],
+            longest_free: vec![side; side as usize],
+        };
+        let (low, high) = (gutter / 2, gutter - gutter / 2);
+        for y in 0..side {
+            if y < low || y >= side.saturating_sub(high) {
+                o.fill(y, 0, side - 1);
+            } else {
+                if low > 0 {
+                    o.fill(y, 0, low - 1);
+                }
+                if high > 0 {
+                    o.fill(y, side - high, side - 1);
+                }
+            }
+            o.longest_free[y as usize] = o.measure_longest_free(y);
+        }
+        o
+    }
+
+    fn measure_longest_free(&self, y: u32) -> u32 {
+        let row = self.row(y);
+        let (mut x, mut longest) = (0, 0);
+        while x < self.side {
+            let a = next(row, x, self.side, false);
+            if a >= self.side {
+                break;
+            }
+            let b = next(row, a, self.side, true);
+            longest = longest.max(b - a);
+            x = b;
+        }
+        longest
+    }
+
+    fn row(&self, y: u32) -> &[u64] {
+        &self.bits[y as usize * self.words..(y as usize + 1) * self.words]
+    }
+
+    /// Marks texels `a..=b` of row `y`.
+    fn fill(&mut self, y: u32, a: u32, b: u32) {
+        let row = &mut self.bits[y as usize * self.words..(y as usize + 1) * self.words];
+        let (wa, wb) = (a as usize / 64, b as usize / 64);
+        for (i, word) in row.iter_mut().enumerate().take(wb + 1).skip(wa) {
+            let lo = if i == wa { a % 64 } else { 0 };
+            let hi = if i == wb { b % 64 } else { 63 };
+            let span = hi - lo + 1;
+            *word |= if span == 64 { !0 } else { ((1u64 << span) - 1) << lo };
+        }
+    }
+
+    /// The first position `(x, y)` where `fp` fits, rows from 0 up, columns from 0 right.
+    fn first_fit(&self, fp: &Footprint) -> Option<(u32, u32)> {
+        if fp.w > self.side || fp.h > self.side {
+            return None;
+        }
+        let need: Vec<u32> =
+            fp.rows.iter().map(|r| r.iter().map(|&(a, b)| b - a + 1).max().unwrap_or(0)).collect();
+        let mut last = 0usize; // the footprint row that blocked last: tried first
+        for y in 0..=self.side - fp.h {
+            let short = |r: usize| self.longest_free[y as usize + r] < need[r];
+            if short(last) || (0..fp.h as usize).any(short) {
+                continue;
+            }
+            let mut x = 0u32;
+            'scan: while x + fp.w <= self.side {
+                for i in 0..fp.h as usize {
+                    let r = (last + i) % fp.h as usize;
+                    let row = self.row(y + r as u32);
+                    for &(a, b) in &fp.rows[r] {
+                        let s = next(row, x + a, self.side, true);
+                        if s <= x + b {
+                            // Every x' with x' + a in the occupied run from `s` collides too.
+                            x = next(row, s, self.side, false) - a;
+                            last = r;
+                            continue 'scan;
+                        }
+                    }
+                }
+                return Some((x, y));
+            }
+        }
+        None
+    }
+
+    /// Marks `fp` placed at `(x, y)`, dilated by `gutter`.
+    fn occupy(&mut self, fp: &Footprint, x: u32, y: u32, gutter: u32) {
+        let last = self.side - 1;
+        for (r, runs) in fp.rows.iter().enumerate() {
+            let yy = y + r as u32;
+            for &(a, b) in runs {
+                let (a, b) = ((x + a).saturating_sub(gutter), (x + b + gutter).min(last));
+                for row in yy.saturating_sub(gutter)..=(yy + gutter).min(last) {
+                    self.fill(row, a, b);
+                }
+            }
+        }
+        let rows = y.saturating_sub(gutter)..=(y + fp.h - 1 + gutter).min(last);
+        for row in rows {
+            self.longest_free[row as usize] = self.measure_longest_free(row);
+        }
+    }
+}
+
+/// Packs `islands` in `order` into a `side²` atlas at atlas `scale` (module docs); `None` when one
+/// does not fit. `texels_per_unit(island, scale)` is the parent's density rule.
+pub(super) fn pack_shapes(
+    islands: &[Island],
+    order: &[usize],
+    texels_per_unit: impl Fn(&Island) -> f64 + Sync,
+    side: u32,
+    gutter: u32,
+    rotate: bool,
+) -> Option<Vec<ShapePlaced>> {
+    let mut occupancy = Occupancy::new(side, gutter);
+    let mut out: Vec<Option<ShapePlaced>> = vec![None; islands.len()];
+    for &i in order {
+        let island = &islands[i];
+        let t = texels_per_unit(island);
+        let occ = &occupancy;
+        let best = orientations(island, rotate)
+            .into_par_iter()
+            .filter_map(|k| {
+                let fp = footprint(island, k, t);
+                occ.first_fit(&fp).map(|(x, y)| ((y + fp.h, x, k), ShapePlaced { x, y, footprint: fp }))
+            })
+            .min_by_key(|(key, _)| *key)
+            .map(|(_, p)| p)?;
+        occupancy.occupy(&best.footprint, best.x, best.y, gutter);
+        out[i] = Some(best);
+    }
+    out.into_iter().collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn square_island(side: f64) -> Island {
+        let points = vec![[0.0, 0.0], [side, 0.0], [side, side], [0.0, side]];
+        Island {
+            rot: [1.0, 0.0],
+            min: [0.0; 2],
+            extent: [side; 2],
+            growth: 1.0,
+            degenerate: false,
+            area_3d: side * side,
+            diagonal: true,
+            points,
+            tris: vec![[0, 1, 2], [0, 2, 3]],
+        }
+    }
+
+    #[test]
+    fn an_aligned_square_touches_exactly_its_texels() {
+        let fp = footprint(&square_island(1.0), 0, 5.0);
+        assert_eq!((fp.w, fp.h), (5, 5));
+        assert!(fp.rows.iter().all(|r| r == &vec![(0, 4)]), "{:?}", fp.rows);
+        // Turned by 45°: a diamond 5√2 across, its rows widening to the middle and narrowing.
+        let fp = footprint(&square_island(1.0), 1, 5.0);
+        assert_eq!((fp.w, fp.h), (8, 8));
+        assert_eq!(fp.rows[0], vec![(2, 4)]);
+        assert_eq!(fp.rows[3], vec![(0, 7)]);
+    }
+
+    #[test]
+    fn a_thin_sliver_still_touches_the_texels_it_crosses() {
+        let island = Island {
+            points: vec![[0.1, 0.1], [3.9, 0.1], [3.9, 0.1000001]],
+            tris: vec![[0, 1, 2]],
+            ..square_island(1.0)
+        };
+        let fp = footprint(&island, 0, 1.0);
+        assert_eq!(fp.rows, vec![vec![(0, 3)]]);
+    }
+
+    #[test]
+    fn fits_skip_occupied_runs_and_respect_border_and_gutter() {
+        let fp = footprint(&square_island(1.0), 0, 3.0);
+        let mut o = Occupancy::new(10, 2);
+        // Border strips of one texel on every side: the first fit is (1, 1).
+        assert_eq!(o.first_fit(&fp), Some((1, 1)));
+        o.occupy(&fp, 1, 1, 2);
+        // Dilated by 2, the square blocks columns and rows 0..=5: next to it from x = 6, and a
+        // 3-wide footprint needs columns 6..=8 (column 9 is border).
+        assert_eq!(o.first_fit(&fp), Some((6, 1)));
+        o.occupy(&fp, 6, 1, 2);
+        assert_eq!(o.first_fit(&fp), Some((1, 6)));
+        o.occupy(&fp, 1, 6, 2);
+        assert_eq!(o.first_fit(&fp), Some((6, 6)));
+        o.occupy(&fp, 6, 6, 2);
+        assert_eq!(o.first_fit(&fp), None);
+    }
+
+    #[test]
+    fn an_l_nests_into_the_corner_of_another() {
+        // Two L islands of three unit squares each (footprints 2×2 minus one texel): the second
+        // sits turned by 180° in the first's notch, in a 3 × 2 area that rectangles need 4 × 2 for.
+        let l = Island {
+            points: vec![[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [1.0, 1.0], [1.0, 2.0], [0.0, 2.0]],
+            tris: vec![[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 5]],
+            extent: [2.0; 2],
+            ..square_island(1.0)
+        };
+        let islands = vec![l.clone(), l];
+        let placed = pack_shapes(&islands, &[0, 1], |_| 1.0, 3, 0, true).expect("fits 3 × 3");
+        let mut cells = std::collections::HashSet::new();
+        for p in &placed {
+            for (r, runs) in p.footprint.rows.iter().enumerate() {
+                for &(a, b) in runs {
+                    for x in a..=b {
+                        assert!(cells.insert((p.x + x, p.y + r as u32)), "overlap at {x},{r}");
+                    }
+                }
+            }
+        }
+        assert_eq!(cells.len(), 6);
+        assert!(cells.iter().all(|&(x, y)| x < 3 && y < 2), "{cells:?}");
+    }
+}
