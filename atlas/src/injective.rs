@@ -1366,7 +1366,7 @@ fn separate_fans(
 }
 
 /// The mean length of the first two edges of the triangles (1 when there are none).
-fn mean_edge(tris: &[(usize, [[f64; 2]; 3])]) -> f64 {
+pub(crate) fn mean_edge(tris: &[(usize, [[f64; 2]; 3])]) -> f64 {
     if tris.is_empty() {
         return 1.0;
     }
@@ -1382,7 +1382,7 @@ fn mean_edge(tris: &[(usize, [[f64; 2]; 3])]) -> f64 {
 /// Triangles in a hashed uniform grid (cells of twice a typical edge), for overlap queries.
 /// Triangles over more than [`TriangleGrid::MAX_CELLS`] cells are kept aside and tested against
 /// every query, and such a query tests everything, so the answers are exact.
-struct TriangleGrid {
+pub(crate) struct TriangleGrid {
     cell: f64,
     cells: HashMap<(i64, i64), Vec<u32>>,
     big: Vec<u32>,
@@ -1393,7 +1393,7 @@ impl TriangleGrid {
     const MAX_CELLS: i64 = 4096;
 
     /// A grid holding `start`, with cells of twice `edge`.
-    fn new(start: &[(usize, [[f64; 2]; 3])], edge: f64) -> TriangleGrid {
+    pub(crate) fn new(start: &[(usize, [[f64; 2]; 3])], edge: f64) -> TriangleGrid {
         let cell = (2.0 * edge).max(f64::MIN_POSITIVE);
         let mut g = TriangleGrid { cell, cells: HashMap::new(), big: Vec::new(), tris: Vec::new() };
         for (_, t) in start {
@@ -1416,7 +1416,7 @@ impl TriangleGrid {
         ((r[1] - r[0] + 1).saturating_mul(r[3] - r[2] + 1) <= Self::MAX_CELLS).then_some(r)
     }
 
-    fn insert(&mut self, t: [[f64; 2]; 3]) {
+    pub(crate) fn insert(&mut self, t: [[f64; 2]; 3]) {
         let id = self.tris.len() as u32;
         self.tris.push(t);
         match self.range(t) {
@@ -1433,7 +1433,7 @@ impl TriangleGrid {
 
     /// The stored triangles that `t` overlaps ([`triangles_overlap`]), by insertion index; one
     /// may be listed more than once.
-    fn overlapping(&self, t: [[f64; 2]; 3]) -> Vec<u32> {
+    pub(crate) fn overlapping(&self, t: [[f64; 2]; 3]) -> Vec<u32> {
         let hit = |&i: &u32| triangles_overlap(t, self.tris[i as usize]);
         let Some([x0, x1, y0, y1]) = self.range(t) else {
             return (0..self.tris.len() as u32).filter(hit).collect();

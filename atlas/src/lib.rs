@@ -14,6 +14,7 @@
 //! | [`metrics`] | Boundary, Stretch, Conformal, Editability over seeded views (definitions there) |
 //! | [`uvstats`] | charts, flips, utilisation and overlaps of a UV layout |
 //! | [`partuv`] | the PartUV comparison's charts, seams, angular score, area distortions, packing |
+//! | [`join`] | joining small islands into a neighbouring one where that stays injective |
 //! | [`refine`] | local/global ARAP refinement of each UV island from its current UVs, never adding flips |
 //! | [`injective`] | every island made injective (no flip, no self-overlap) and its distortion lowered by SLIM |
 //! | [`untangle`] | turning flipped faces back by moving single UV vertices (the bake's option) |
@@ -32,6 +33,7 @@ mod font;
 pub mod gltf_scene;
 pub mod injective;
 pub mod islands;
+pub mod join;
 pub mod load;
 pub mod metrics;
 pub mod pack;

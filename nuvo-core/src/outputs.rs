@@ -29,6 +29,7 @@ use nuvo_atlas::camera::orbit_views;
 use nuvo_atlas::export::{GlbOptions, glb_vertex_map, write_glb, write_obj};
 use nuvo_atlas::injective::{InjectiveOptions, InjectiveReport, make_injective};
 use nuvo_atlas::islands::{IslandPacking, pack_islands};
+use nuvo_atlas::join::{JoinOptions, JoinReport, join_small_islands};
 use nuvo_atlas::metrics::{EvalOptions, Metrics, evaluate};
 use nuvo_atlas::pack::AtlasLayout;
 use nuvo_atlas::pictures::{
@@ -109,6 +110,8 @@ pub struct LayoutSummary {
     pub refine: Option<RefineReport>,
     /// What making every island injective did (`output.injective`, after the refinement).
     pub injective: Option<InjectiveReport>,
+    /// What joining small islands did (`output.join`, after `injective`).
+    pub join: Option<JoinReport>,
     /// Islands packed, with `packing = "islands"`.
     pub islands: Option<usize>,
 }
@@ -116,7 +119,8 @@ pub struct LayoutSummary {
 /// Refines and packs the baked layout as `opts` asks (both off: the bake as it is).
 fn finish_layout(mesh: TriMesh, opts: &OutputConfig) -> Result<(TriMesh, LayoutSummary), OutputError> {
     let mut mesh = mesh;
-    let mut summary = LayoutSummary { packing: opts.packing, refine: None, injective: None, islands: None };
+    let mut summary =
+        LayoutSummary { packing: opts.packing, refine: None, injective: None, join: None, islands: None };
     if opts.refine {
         let refined = refine_islands(&mesh, &RefineOptions::default())?;
         mesh = refined.mesh;
@@ -128,6 +132,11 @@ fn finish_layout(mesh: TriMesh, opts: &OutputConfig) -> Result<(TriMesh, LayoutS
         let injective = make_injective(&mesh, &InjectiveOptions { split, ..Default::default() })?;
         mesh = injective.mesh;
         summary.injective = Some(injective.report);
+    }
+    if opts.join {
+        let joined = join_small_islands(&mesh, &JoinOptions::default())?;
+        mesh = joined.mesh;
+        summary.join = Some(joined.report);
     }
     if opts.packing == Packing::Islands {
         let packing = IslandPacking { resolution: opts.atlas_resolution, gutter: opts.gutter, rotate: true };
@@ -218,9 +227,12 @@ fn bake_and_measure(
     let (layout_mesh, finished) = finish_layout(baked.mesh, opts)?;
     let baked = nuvo_atlas::bake::Baked { mesh: layout_mesh, ..baked };
     // Refinement and packing move UVs: count flips and overlaps again on what is written.
-    let recount = (finished.refine.is_some() || finished.injective.is_some() || finished.islands.is_some())
-        .then(|| analyse_uv(&baked.mesh, Some(&baked.face_chart), opts.atlas_resolution))
-        .transpose()?;
+    let recount = (finished.refine.is_some()
+        || finished.injective.is_some()
+        || finished.join.is_some()
+        || finished.islands.is_some())
+    .then(|| analyse_uv(&baked.mesh, Some(&baked.face_chart), opts.atlas_resolution))
+    .transpose()?;
     let mut files = Vec::new();
     let path = |name: &str| dir.join(name);
 

@@ -236,7 +236,7 @@ pub fn recipe(r: &RecipeInput) -> String {
     if clean {
         // Injectivity holds on clean meshes at a small cost in Editability; on marching-cubes
         // meshes its new seams cost far more (BENCHMARKS.md, "Injective islands").
-        bake += "round_trip_tolerance = 0.1\nuntangle = true\ninjective = true\n";
+        bake += "round_trip_tolerance = 0.1\nuntangle = true\ninjective = true\njoin = true\n";
     }
     let stop =
         r.stop_after_seconds.map(|s| format!("time_budget_minutes = {}\n", s / 60.0)).unwrap_or_default();
@@ -519,6 +519,7 @@ mod tests {
         let clean = crate::config::from_str("clean", &recipe(&base)).unwrap().config;
         assert_eq!((clean.model.charts, clean.training.steps, clean.seed), (5, 900, 3));
         assert!(clean.output.untangle && clean.output.round_trip_tolerance > 0.0 && clean.output.injective);
+        assert!(clean.output.join);
         assert_eq!(clean.training.time_budget_minutes, Some(1.5));
         assert_eq!(clean.warm_start.unwrap().steps, 270);
         let flipped = RecipeInput { flip_normals: true, ..base };
@@ -528,6 +529,7 @@ mod tests {
         let unruly = RecipeInput { sampling: SamplingMode::Visible, ..base };
         let c = crate::config::from_str("unruly", &recipe(&unruly)).unwrap().config;
         assert!(!c.output.untangle && c.output.round_trip_tolerance == 0.0 && !c.output.injective);
+        assert!(!c.output.join);
         assert!(c.output.refine, "refinement holds everywhere");
         assert_eq!(c.geometry.options["sampling"].as_str(), Some("visible"));
         let grid = RecipeInput {

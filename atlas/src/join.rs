@@ -1,0 +1,511 @@
+//! Joining small islands into a neighbouring one (issue 19: "single-face and sliver islands join a
+//! neighbouring chart").
+//!
+//! Nuvo's bake leaves a few islands of one to a few dozen faces where a chart's region frays (a
+//! face whose corners the networks assign to different charts, a sliver the injective pass
+//! detached). Each costs a seam all round it and a cell in the atlas for almost no surface. On the
+//! Common Shapes atlases 137 of 250 islands held under 0.2% of their mesh's area.
+//! [`join_small_islands`] grows each such island's faces onto the neighbour it shares the longest
+//! edge with, face by face from their shared edges, and keeps the result only where it stays
+//! injective, so it never adds a flip or an overlap.
+//!
+//! Definitions (exact):
+//! - **Islands**: [`crate::uvstats::uv_islands`]. An island is **small** when its 3-D area is below
+//!   [`JoinOptions::max_area_share`] of the mesh's. Small islands are tried in order of
+//!   increasing area (ties by island index), each once, against the islands as they are then
+//!   (so a small island can join one that grew before it).
+//! - **Neighbour**: an island with a face across a mesh edge (same two vertices) from one of the
+//!   small island's faces; neighbours are tried in order of the summed 3-D length of such edges,
+//!   longest first (ties by the lower island index), at most [`MAX_NEIGHBOURS_TRIED`].
+//! - **Seeding**: every mesh vertex of a shared edge takes the neighbour's texture coordinate at
+//!   it, from the neighbour's face across that edge. When one vertex would take two different
+//!   values (the neighbour has its own seam there), the neighbour is not used.
+//! - **Growing**: faces of the small island with two corners placed and the third not are placed
+//!   breadth-first (in face order within each wave), the third corner on the side of the placed
+//!   edge that gives the face the neighbour's orientation (the sign of its summed signed UV
+//!   area), by one of two rules tried in turn: **similar** (the face similar to its 3-D shape,
+//!   at the placed edge's UV-to-3-D scale: no angle distortion), then **density** (as far along
+//!   the edge as in 3-D at the edge's scale, as far from it as in 3-D at the neighbour's scale
+//!   `sqrt(ΣA_uv / ΣA_3d)`, so a seed edge stretched in UV stretches the face only along itself).
+//!   A corner placed once keeps its place for every later face.
+//! - **Check**: the joined faces must all have that orientation with a UV area above 1e-12 of the
+//!   neighbour's UV area per face and a UV-to-3-D area ratio within a factor [`MAX_AREA_RATIO`]
+//!   of the neighbour's (faces of no 3-D area excepted), and none may overlap (interiors) a face
+//!   of the neighbour or another joined face, and the neighbour's area distortion (the mean of
+//!   `max(r, 1/r)`, `r` a face's area ratio over the set's, clipped at 10: PartUV's measure)
+//!   may rise by at most [`MAX_DISTORTION_RISE`]. Otherwise the next rule or neighbour is tried,
+//!   and when none passes the island stays as it was.
+//! - **Output**: same positions, faces and face order; joined faces use the neighbour's
+//!   coordinates at the seeded vertices and new coordinates (appended) at the grown ones. The
+//!   small island's old coordinates stay in the layer unused; island packing drops them.
+//!
+//! Sequential and free of hashing order: the result is deterministic.
+
+use std::collections::HashMap;
+
+use nuvo_geometry::{TriMesh, UvLayer};
+use serde::Serialize;
+
+use crate::error::AtlasError;
+use crate::injective::{TriangleGrid, mean_edge};
+use crate::uvstats::{require_uv, uv_islands};
+use crate::vecmath::{cross, norm, sub, v3};
+
+/// Neighbours tried per small island, longest shared edge first.
+pub const MAX_NEIGHBOURS_TRIED: usize = 3;
+/// Largest ratio (either way) between a joined face's UV-to-3-D area ratio and its neighbour's
+/// whole one: a grown face beyond it would stretch the texture there more than the join is worth.
+pub const MAX_AREA_RATIO: f64 = 4.0;
+/// How much a join may raise the neighbour's area distortion (the mean folded area ratio).
+pub const MAX_DISTORTION_RISE: f64 = 0.01;
+
+/// Which islands [`join_small_islands`] joins.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct JoinOptions {
+    /// An island holding less than this share of the mesh's 3-D area is small.
+    pub max_area_share: f64,
+}
+
+impl Default for JoinOptions {
+    /// 0.2% of the surface: twice the share below which `nuvo_geometry::profile` calls a piece a
+    /// fragment.
+    fn default() -> Self {
+        Self { max_area_share: 2e-3 }
+    }
+}
+
+/// What [`join_small_islands`] did.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct JoinReport {
+    /// Islands before.
+    pub islands_before: usize,
+    /// Small islands found.
+    pub small: usize,
+    /// Small islands joined into a neighbour.
+    pub joined: usize,
+    /// Faces those held.
+    pub joined_faces: usize,
+}
+
+/// A mesh whose small islands have joined their neighbours, and the report.
+#[derive(Clone, Debug)]
+pub struct Joined {
+    /// Same positions and faces, new UV layer.
+    pub mesh: TriMesh,
+    /// What was done.
+    pub report: JoinReport,
+}
+
+/// Joins every small island of `mesh` into a neighbouring island where that keeps both injective
+/// (module docs).
+///
+/// Errors ([`AtlasError`]): the mesh has no UVs or an index out of range.
+pub fn join_small_islands(mesh: &TriMesh, opts: &JoinOptions) -> Result<Joined, AtlasError> {
+    let uv = require_uv(mesh)?;
+    mesh.validate().map_err(|e| AtlasError::invalid("mesh", e.to_string()))?;
+    let islands = uv_islands(mesh, uv);
+    let n = islands.len();
+    let area3: Vec<f64> = (0..mesh.triangles.len())
+        .map(|f| {
+            let [a, b, c] = mesh.corners(f).map(v3);
+            0.5 * norm(cross(sub(b, a), sub(c, a)))
+        })
+        .collect();
+    let total: f64 = area3.iter().sum();
+    let island_area: Vec<f64> =
+        islands.iter().map(|fs| fs.iter().map(|&f| area3[f as usize]).sum()).collect();
+    let mut label = vec![0u32; mesh.triangles.len()];
+    for (i, fs) in islands.iter().enumerate() {
+        for &f in fs {
+            label[f as usize] = i as u32;
+        }
+    }
+    let mut small: Vec<usize> = (0..n).filter(|&i| island_area[i] < opts.max_area_share * total).collect();
+    small.sort_by(|&a, &b| island_area[a].total_cmp(&island_area[b]).then(a.cmp(&b)));
+    let mut report = JoinReport { islands_before: n, small: small.len(), ..Default::default() };
+    // Faces of each mesh edge.
+    let mut edge_faces: HashMap<(u32, u32), Vec<(u32, usize)>> = HashMap::new();
+    for (f, t) in mesh.triangles.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            edge_faces.entry((a.min(b), a.max(b))).or_default().push((f as u32, k));
+        }
+    }
+    let mut work = Work {
+        mesh,
+        area3: area3.clone(),
+        coords: uv.coords.iter().map(|p| p.map(f64::from)).collect(),
+        tris: uv.triangles.clone(),
+        members: islands,
+        label,
+    };
+    for s in small {
+        let faces = work.members[s].clone();
+        // Neighbours by shared 3-D edge length.
+        let mut shared: Vec<(u32, f64)> = Vec::new();
+        for &f in &faces {
+            let t = mesh.triangles[f as usize];
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                let len = norm(sub(v3(mesh.positions[a as usize]), v3(mesh.positions[b as usize])));
+                for &(g, _) in &edge_faces[&(a.min(b), a.max(b))] {
+                    let l = work.label[g as usize];
+                    if l as usize != s {
+                        match shared.iter_mut().find(|(m, _)| *m == l) {
+                            Some(e) => e.1 += len,
+                            None => shared.push((l, len)),
+                        }
+                    }
+                }
+            }
+        }
+        shared.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+        let tries = shared
+            .iter()
+            .take(MAX_NEIGHBOURS_TRIED)
+            .flat_map(|&(nb, _)| [(nb, Growth::Similar), (nb, Growth::Density)]);
+        for (nb, growth) in tries {
+            if let Some(placed) = work.try_join(&faces, nb, &edge_faces, growth) {
+                work.commit(s, nb, &faces, placed);
+                report.joined += 1;
+                report.joined_faces += faces.len();
+                break;
+            }
+        }
+    }
+    let coords = work.coords.iter().map(|p| p.map(|x| x as f32)).collect();
+    Ok(Joined {
+        mesh: TriMesh {
+            positions: mesh.positions.clone(),
+            triangles: mesh.triangles.clone(),
+            uv: Some(UvLayer { coords, triangles: work.tris }),
+        },
+        report,
+    })
+}
+
+/// The layout being joined.
+struct Work<'a> {
+    mesh: &'a TriMesh,
+    area3: Vec<f64>,
+    coords: Vec<[f64; 2]>,
+    tris: Vec<[u32; 3]>,
+    members: Vec<Vec<u32>>,
+    label: Vec<u32>,
+}
+
+/// A joined island's corners: per face of it, per corner, an existing coordinate or a new one
+/// (an index into the new values).
+struct Placed {
+    corners: Vec<[Corner; 3]>,
+    new_values: Vec<[f64; 2]>,
+}
+
+/// How a grown face's free corner is placed from its placed edge (module docs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Growth {
+    /// The face similar to its 3-D shape, at the placed edge's scale.
+    Similar,
+    /// Along the edge at its scale, across it at the neighbour's.
+    Density,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Corner {
+    Existing(u32),
+    New(u32),
+}
+
+impl Work<'_> {
+    fn uv_area2(&self, t: [u32; 3]) -> f64 {
+        let [a, b, c] = t.map(|i| self.coords[i as usize]);
+        (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+    }
+
+    /// The faces `faces` grown onto island `nb` and checked (module docs), `None` when they cannot
+    /// join it.
+    fn try_join(
+        &self,
+        faces: &[u32],
+        nb: u32,
+        edge_faces: &HashMap<(u32, u32), Vec<(u32, usize)>>,
+        growth: Growth,
+    ) -> Option<Placed> {
+        let nb_faces = &self.members[nb as usize];
+        let signed: f64 = nb_faces.iter().map(|&g| self.uv_area2(self.tris[g as usize])).sum();
+        let unsigned: f64 = nb_faces.iter().map(|&g| self.uv_area2(self.tris[g as usize]).abs()).sum();
+        if signed == 0.0 || unsigned <= 0.0 {
+            return None;
+        }
+        let orient = signed.signum();
+        let nb_area3: f64 = nb_faces.iter().map(|&g| self.area3[g as usize]).sum();
+        let density = unsigned / nb_area3.max(f64::MIN_POSITIVE); // UV area per 3-D area
+        let scale = density.sqrt(); // UV length per 3-D length
+        // Seeds: the neighbour's coordinate at each vertex of a shared edge.
+        let mut at: HashMap<u32, Corner> = HashMap::new();
+        let mut value: HashMap<u32, [f64; 2]> = HashMap::new();
+        for &f in faces {
+            let t = self.mesh.triangles[f as usize];
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                for &(g, j) in &edge_faces[&(a.min(b), a.max(b))] {
+                    if self.label[g as usize] != nb {
+                        continue;
+                    }
+                    let (gt, gc) = (self.mesh.triangles[g as usize], self.tris[g as usize]);
+                    for (v, c) in [(gt[j], gc[j]), (gt[(j + 1) % 3], gc[(j + 1) % 3])] {
+                        let p = self.coords[c as usize];
+                        match value.get(&v) {
+                            Some(q) if *q != p => return None,
+                            Some(_) => {}
+                            None => {
+                                value.insert(v, p);
+                                at.insert(v, Corner::Existing(c));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        if at.is_empty() {
+            return None;
+        }
+        // Grow breadth-first.
+        let mut new_values: Vec<[f64; 2]> = Vec::new();
+        let mut done = vec![false; faces.len()];
+        loop {
+            let mut progress = false;
+            for (i, &f) in faces.iter().enumerate() {
+                if done[i] {
+                    continue;
+                }
+                let t = self.mesh.triangles[f as usize];
+                let known: Vec<usize> = (0..3).filter(|&k| value.contains_key(&t[k])).collect();
+                match known.len() {
+                    3 => done[i] = true,
+                    2 => {
+                        // Corners in cyclic order: placed `a`, `b`, then the free one `c`.
+                        let k = (0..3).find(|k| !known.contains(k)).unwrap();
+                        let (a, b, c) = (t[(k + 1) % 3], t[(k + 2) % 3], t[k]);
+                        let (ua, ub) = (value[&a], value[&b]);
+                        let pos = |v: u32| v3(self.mesh.positions[v as usize]);
+                        let (e, w) = (sub(pos(b), pos(a)), sub(pos(c), pos(a)));
+                        let len2 = e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
+                        if len2 <= 0.0 {
+                            return None;
+                        }
+                        // `c` in the frame of edge a→b: along it and to its left (a, b, c CCW).
+                        let along = (e[0] * w[0] + e[1] * w[1] + e[2] * w[2]) / len2;
+                        let d = [ub[0] - ua[0], ub[1] - ua[1]];
+                        let d_len = d[0].hypot(d[1]);
+                        if d_len <= 0.0 {
+                            return None;
+                        }
+                        let left = match growth {
+                            Growth::Similar => norm(cross(e, w)) / len2,
+                            Growth::Density => norm(cross(e, w)) / len2.sqrt() * scale / d_len,
+                        };
+                        let n = [-d[1] * orient, d[0] * orient];
+                        let uc = [ua[0] + along * d[0] + left * n[0], ua[1] + along * d[1] + left * n[1]];
+                        new_values.push(uc);
+                        value.insert(c, uc);
+                        at.insert(c, Corner::New(new_values.len() as u32 - 1));
+                        done[i] = true;
+                        progress = true;
+                    }
+                    _ => {}
+                }
+            }
+            if !progress {
+                break;
+            }
+        }
+        if !done.iter().all(|&d| d) {
+            return None;
+        }
+        // Check: oriented, not degenerate, no overlap with the neighbour or each other. Triangles
+        // are tested counter-clockwise (mirrored when the neighbour is clockwise).
+        let min_area2 = 1e-12 * unsigned * 2.0 / nb_faces.len() as f64;
+        let ccw = |t: [[f64; 2]; 3]| if orient > 0.0 { t } else { t.map(|p| [-p[0], p[1]]) };
+        let joined: Vec<[[f64; 2]; 3]> =
+            faces.iter().map(|&f| self.mesh.triangles[f as usize].map(|v| value[&v])).collect();
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for (t, &f) in joined.iter().zip(faces) {
+            let [a, b, c] = *t;
+            let area2 = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+            if area2 * orient <= min_area2 {
+                return None;
+            }
+            let a3 = self.area3[f as usize];
+            if a3 > 0.0 {
+                let r = 0.5 * area2.abs() / a3 / density;
+                if r.max(1.0 / r) > MAX_AREA_RATIO {
+                    return None;
+                }
+            }
+            for p in t {
+                for k in 0..2 {
+                    lo[k] = lo[k].min(p[k]);
+                    hi[k] = hi[k].max(p[k]);
+                }
+            }
+        }
+        let near: Vec<(usize, [[f64; 2]; 3])> = nb_faces
+            .iter()
+            .map(|&g| self.tris[g as usize].map(|c| self.coords[c as usize]))
+            .filter(|t| (0..2).all(|k| t.iter().any(|p| p[k] >= lo[k]) && t.iter().any(|p| p[k] <= hi[k])))
+            .map(&ccw)
+            .enumerate()
+            .collect();
+        let joined_ccw: Vec<(usize, [[f64; 2]; 3])> = joined.iter().map(|t| ccw(*t)).enumerate().collect();
+        let mut grid = TriangleGrid::new(&near, mean_edge(&joined_ccw).max(mean_edge(&near)));
+        for (_, t) in &joined_ccw {
+            if !grid.overlapping(*t).is_empty() {
+                return None;
+            }
+            grid.insert(*t);
+        }
+        // The neighbour's area distortion (PartUV's, without its small-face rule) may rise only a
+        // little.
+        let before =
+            self.area_distortion(nb_faces.iter().map(|&g| (self.uv_area2(self.tris[g as usize]).abs(), g)));
+        let grown = joined.iter().zip(faces).map(|(t, &f)| {
+            let [a, b, c] = *t;
+            (((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])).abs(), f)
+        });
+        let after = self.area_distortion(
+            nb_faces.iter().map(|&g| (self.uv_area2(self.tris[g as usize]).abs(), g)).chain(grown),
+        );
+        if after > before + MAX_DISTORTION_RISE {
+            return None;
+        }
+        let corners = faces.iter().map(|&f| self.mesh.triangles[f as usize].map(|v| at[&v])).collect();
+        Some(Placed { corners, new_values })
+    }
+
+    /// Mean over faces of `max(r, 1/r)`, `r` a face's UV-to-3-D area ratio over the set's, clipped
+    /// at 10, for faces given as `(twice the UV area, face)`; faces without area left out.
+    fn area_distortion(&self, faces: impl Iterator<Item = (f64, u32)> + Clone) -> f64 {
+        let (uv, a3): (f64, f64) =
+            faces.clone().fold((0.0, 0.0), |(u, a), (x, f)| (u + x, a + self.area3[f as usize]));
+        let (mut sum, mut n) = (0.0, 0usize);
+        for (x, f) in faces {
+            let a = self.area3[f as usize];
+            if x > 0.0 && a > 0.0 && uv > 0.0 {
+                let r = (x / a) / (uv / a3);
+                sum += r.max(1.0 / r).min(10.0);
+                n += 1;
+            }
+        }
+        if n == 0 { 1.0 } else { sum / n as f64 }
+    }
+
+    /// Writes `placed` for island `s`'s `faces`, which now belong to `nb`.
+    fn commit(&mut self, s: usize, nb: u32, faces: &[u32], placed: Placed) {
+        let base = self.coords.len() as u32;
+        self.coords.extend_from_slice(&placed.new_values);
+        for (&f, corners) in faces.iter().zip(&placed.corners) {
+            self.tris[f as usize] = corners.map(|c| match c {
+                Corner::Existing(i) => i,
+                Corner::New(i) => base + i,
+            });
+            self.label[f as usize] = nb;
+        }
+        let moved = std::mem::take(&mut self.members[s]);
+        self.members[nb as usize].extend(moved);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::uvstats::uv_charts;
+
+    /// A strip of `k` unit squares along x (two faces each), UVs `0.1 · (x, y)`, with the last
+    /// square's two faces on UVs of their own (shifted by `shift`, a separate island).
+    fn strip_with_a_detached_square(k: usize, shift: [f32; 2]) -> TriMesh {
+        let mut positions = Vec::new();
+        for i in 0..=k {
+            positions.push([i as f32, 0.0, 0.0]);
+            positions.push([i as f32, 1.0, 0.0]);
+        }
+        let mut triangles = Vec::new();
+        let mut uvt = Vec::new();
+        let mut coords: Vec<[f32; 2]> = positions.iter().map(|p| [0.1 * p[0], 0.1 * p[1]]).collect();
+        for i in 0..k as u32 {
+            let (a, b, c, d) = (2 * i, 2 * i + 2, 2 * i + 3, 2 * i + 1);
+            triangles.push([a, b, c]);
+            triangles.push([a, c, d]);
+            if i as usize == k - 1 {
+                let base = coords.len() as u32;
+                for v in [a, b, c, d] {
+                    let p = coords[v as usize];
+                    coords.push([p[0] + shift[0], p[1] + shift[1]]);
+                }
+                uvt.push([base, base + 1, base + 2]);
+                uvt.push([base, base + 2, base + 3]);
+            } else {
+                uvt.push([a, b, c]);
+                uvt.push([a, c, d]);
+            }
+        }
+        TriMesh { positions, triangles, uv: Some(UvLayer { coords, triangles: uvt }) }
+    }
+
+    #[test]
+    fn a_detached_square_grows_back_onto_its_strip() {
+        let m = strip_with_a_detached_square(600, [0.5, 0.5]);
+        assert_eq!(uv_charts(&m, m.uv.as_ref().unwrap()).1, 2);
+        let out = join_small_islands(&m, &JoinOptions::default()).unwrap();
+        assert_eq!((out.report.small, out.report.joined, out.report.joined_faces), (1, 1, 2));
+        let uv = out.mesh.uv.as_ref().unwrap();
+        assert_eq!(uv_charts(&out.mesh, uv).1, 1);
+        // Grown isometrically at the strip's density: exactly where the strip would have it.
+        let last = 2 * 600 - 1;
+        for f in [last - 1, last] {
+            for k in 0..3 {
+                let p = m.positions[m.triangles[f][k] as usize];
+                let q = uv.coords[uv.triangles[f][k] as usize];
+                assert!(
+                    (q[0] - 0.1 * p[0]).abs() < 1e-4 && (q[1] - 0.1 * p[1]).abs() < 1e-4,
+                    "{q:?} vs {p:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn an_island_that_would_overlap_its_neighbour_stays_apart() {
+        // A strip folded back in UV over itself (a U in 3-D laid flat would overlap): the last
+        // square, grown back, would land on the strip's first one.
+        let mut m = strip_with_a_detached_square(600, [0.5, 0.5]);
+        // Put the strip's first square's UVs where the grown square goes.
+        let uv = m.uv.as_mut().unwrap();
+        uv.coords[0] = [59.95, 0.0];
+        uv.coords[1] = [59.95, 0.1];
+        let before = uv_charts(&m, m.uv.as_ref().unwrap()).1;
+        let out = join_small_islands(&m, &JoinOptions::default()).unwrap();
+        assert_eq!(out.report.joined, 0);
+        assert_eq!(uv_charts(&out.mesh, out.mesh.uv.as_ref().unwrap()).1, before);
+        assert_eq!(out.mesh.uv, m.uv);
+    }
+
+    #[test]
+    fn an_island_that_would_be_stretched_stays_apart() {
+        // The strip's last shared edge is ten times as long in UV as the density says: grown
+        // from it by either rule, the square would be stretched tenfold.
+        let mut m = strip_with_a_detached_square(600, [0.5, 0.5]);
+        let uv = m.uv.as_mut().unwrap();
+        uv.coords[2 * 599 + 1][1] = 1.0;
+        let out = join_small_islands(&m, &JoinOptions::default()).unwrap();
+        assert_eq!((out.report.small, out.report.joined), (1, 0));
+        assert_eq!(out.mesh.uv, m.uv);
+    }
+
+    #[test]
+    fn a_large_island_is_not_small() {
+        let m = strip_with_a_detached_square(4, [0.5, 0.5]);
+        let out = join_small_islands(&m, &JoinOptions::default()).unwrap();
+        assert_eq!((out.report.small, out.report.joined), (0, 0));
+    }
+}
