@@ -646,9 +646,9 @@ fn best_shapes(
         o
     };
     let trial = |scale: f64| {
-        let tpu = |i: &Island| i.texels_per_unit(scale, res);
-        shapes::pack_shapes(islands, &by_area, tpu, res, gutter, rotate)
-            .or_else(|| shapes::pack_shapes(islands, &by_side, tpu, res, gutter, rotate))
+        let fps = shapes::footprints(islands, |i: &Island| i.texels_per_unit(scale, res), rotate);
+        shapes::pack_shapes(&fps, &by_area, res, gutter)
+            .or_else(|| shapes::pack_shapes(&fps, &by_side, res, gutter))
     };
     let mut best = (from, trial(from)?);
     // Every face area at once cannot exceed the square: the scale at which it would fill it.

@@ -315,32 +315,42 @@ impl Occupancy {
     }
 }
 
-/// Packs `islands` in `order` into a `side²` atlas at atlas `scale` (module docs); `None` when one
-/// does not fit. `texels_per_unit(island, scale)` is the parent's density rule.
-pub(super) fn pack_shapes(
+/// The footprints of every island in each of its orientations at `texels_per_unit(island)`
+/// texels per input unit (the parent's density rule at one atlas scale), islands in parallel.
+pub(super) fn footprints(
     islands: &[Island],
-    order: &[usize],
     texels_per_unit: impl Fn(&Island) -> f64 + Sync,
+    rotate: bool,
+) -> Vec<Vec<Footprint>> {
+    islands
+        .par_iter()
+        .map(|island| {
+            let t = texels_per_unit(island);
+            orientations(island, rotate).into_iter().map(|k| footprint(island, k, t)).collect()
+        })
+        .collect()
+}
+
+/// Packs the islands whose [`footprints`] are given, in `order`, into a `side²` atlas (module
+/// docs); `None` when one does not fit.
+pub(super) fn pack_shapes(
+    footprints: &[Vec<Footprint>],
+    order: &[usize],
     side: u32,
     gutter: u32,
-    rotate: bool,
 ) -> Option<Vec<ShapePlaced>> {
     let mut occupancy = Occupancy::new(side, gutter);
-    let mut out: Vec<Option<ShapePlaced>> = vec![None; islands.len()];
+    let mut out: Vec<Option<ShapePlaced>> = vec![None; footprints.len()];
     for &i in order {
-        let island = &islands[i];
-        let t = texels_per_unit(island);
         let occ = &occupancy;
-        let best = orientations(island, rotate)
-            .into_par_iter()
-            .filter_map(|k| {
-                let fp = footprint(island, k, t);
-                occ.first_fit(&fp).map(|(x, y)| ((y + fp.h, x, k), ShapePlaced { x, y, footprint: fp }))
-            })
-            .min_by_key(|(key, _)| *key)
-            .map(|(_, p)| p)?;
-        occupancy.occupy(&best.footprint, best.x, best.y, gutter);
-        out[i] = Some(best);
+        let (_, k, x, y) = footprints[i]
+            .par_iter()
+            .enumerate()
+            .filter_map(|(k, fp)| occ.first_fit(fp).map(|(x, y)| ((y + fp.h, x, k), k, x, y)))
+            .min_by_key(|(key, ..)| *key)?;
+        let footprint = footprints[i][k].clone();
+        occupancy.occupy(&footprint, x, y, gutter);
+        out[i] = Some(ShapePlaced { x, y, footprint });
     }
     out.into_iter().collect()
 }
@@ -416,7 +426,8 @@ mod tests {
             ..square_island(1.0)
         };
         let islands = vec![l.clone(), l];
-        let placed = pack_shapes(&islands, &[0, 1], |_| 1.0, 3, 0, true).expect("fits 3 × 3");
+        let fps = footprints(&islands, |_| 1.0, true);
+        let placed = pack_shapes(&fps, &[0, 1], 3, 0).expect("fits 3 × 3");
         let mut cells = std::collections::HashSet::new();
         for p in &placed {
             for (r, runs) in p.footprint.rows.iter().enumerate() {
