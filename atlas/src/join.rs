@@ -31,9 +31,8 @@
 //! - **Check**: the joined faces must all have that orientation with a UV area above 1e-12 of the
 //!   neighbour's UV area per face and a UV-to-3-D area ratio within a factor [`MAX_AREA_RATIO`]
 //!   of the neighbour's (faces of no 3-D area excepted), and none may overlap (interiors) a face
-//!   of the neighbour or another joined face, and the neighbour's area distortion (the mean of
-//!   `max(r, 1/r)`, `r` a face's area ratio over the set's, clipped at 10: PartUV's measure)
-//!   may rise by at most [`MAX_DISTORTION_RISE`]. Otherwise the next rule or neighbour is tried,
+//!   of the neighbour or another joined face, and the neighbour's area distortion
+//!   ([`crate::partuv`]'s, of one chart) may rise by at most [`MAX_DISTORTION_RISE`]. Otherwise the next rule or neighbour is tried,
 //!   and when none passes the island stays as it was.
 //! - **Output**: same positions, faces and face order; joined faces use the neighbour's
 //!   coordinates at the seeded vertices and new coordinates (appended) at the grown ones. The
@@ -48,6 +47,7 @@ use serde::Serialize;
 
 use crate::error::AtlasError;
 use crate::injective::{TriangleGrid, mean_edge};
+use crate::partuv::area_distortion;
 use crate::uvstats::{require_uv, uv_islands};
 use crate::vecmath::{cross, norm, sub, v3};
 
@@ -365,39 +365,25 @@ impl Work<'_> {
             }
             grid.insert(*t);
         }
-        // The neighbour's area distortion (PartUV's, without its small-face rule) may rise only a
-        // little.
-        let before =
-            self.area_distortion(nb_faces.iter().map(|&g| (self.uv_area2(self.tris[g as usize]).abs(), g)));
-        let grown = joined.iter().zip(faces).map(|(t, &f)| {
-            let [a, b, c] = *t;
-            (((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])).abs(), f)
-        });
-        let after = self.area_distortion(
-            nb_faces.iter().map(|&g| (self.uv_area2(self.tris[g as usize]).abs(), g)).chain(grown),
-        );
-        if after > before + MAX_DISTORTION_RISE {
+        // The neighbour's area distortion (PartUV's measure) may rise only a little.
+        let all: Vec<u32> = nb_faces.iter().chain(faces).copied().collect();
+        let area_3d: Vec<f64> = all.iter().map(|&f| self.area3[f as usize]).collect();
+        let area_uv: Vec<f64> = nb_faces
+            .iter()
+            .map(|&g| self.uv_area2(self.tris[g as usize]).abs())
+            .chain(
+                joined
+                    .iter()
+                    .map(|&[a, b, c]| ((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])).abs()),
+            )
+            .collect();
+        let set: Vec<u32> = (0..all.len() as u32).collect();
+        let distortion = |n: usize| area_distortion(&area_3d, &area_uv, &set[..n]).value.unwrap_or(1.0);
+        if distortion(all.len()) > distortion(nb_faces.len()) + MAX_DISTORTION_RISE {
             return None;
         }
         let corners = faces.iter().map(|&f| self.mesh.triangles[f as usize].map(|v| at[&v])).collect();
         Some(Placed { corners, new_values })
-    }
-
-    /// Mean over faces of `max(r, 1/r)`, `r` a face's UV-to-3-D area ratio over the set's, clipped
-    /// at 10, for faces given as `(twice the UV area, face)`; faces without area left out.
-    fn area_distortion(&self, faces: impl Iterator<Item = (f64, u32)> + Clone) -> f64 {
-        let (uv, a3): (f64, f64) =
-            faces.clone().fold((0.0, 0.0), |(u, a), (x, f)| (u + x, a + self.area3[f as usize]));
-        let (mut sum, mut n) = (0.0, 0usize);
-        for (x, f) in faces {
-            let a = self.area3[f as usize];
-            if x > 0.0 && a > 0.0 && uv > 0.0 {
-                let r = (x / a) / (uv / a3);
-                sum += r.max(1.0 / r).min(10.0);
-                n += 1;
-            }
-        }
-        if n == 0 { 1.0 } else { sum / n as f64 }
     }
 
     /// Writes `placed` for island `s`'s `faces`, which now belong to `nb`.

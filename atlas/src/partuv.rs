@@ -253,9 +253,9 @@ fn angular_score(mesh: &TriMesh, uv: &UvLayer, square: &AtlasSquare) -> (f64, us
 
 /// The area distortion of one set of faces (module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
-struct SetDistortion {
+pub(crate) struct SetDistortion {
     /// Mean folded, clipped ratio over the measured faces; `None` when no face is measured.
-    value: Option<f64>,
+    pub(crate) value: Option<f64>,
     /// Faces of the set left out.
     skipped: usize,
 }
@@ -263,7 +263,7 @@ struct SetDistortion {
 /// The area distortion of the faces `set` (module docs): ratios relative to the set's own
 /// `ΣA_uv / ΣA_3d` (sums over all of `set`), folded, clipped at [`AREA_RATIO_CLIP`], averaged over
 /// the faces with `A_uv > 0` and `A_3d ≥ MIN_AREA_3D_OF_MEAN × mean A_3d` (and `A_3d > 0`).
-fn area_distortion(area_3d: &[f64], area_uv: &[f64], set: &[u32]) -> SetDistortion {
+pub(crate) fn area_distortion(area_3d: &[f64], area_uv: &[f64], set: &[u32]) -> SetDistortion {
     let sum_3d: f64 = set.iter().map(|&f| area_3d[f as usize]).sum();
     let sum_uv: f64 = set.iter().map(|&f| area_uv[f as usize]).sum();
     if set.is_empty() || !(sum_3d > 0.0 && sum_uv > 0.0) {
