@@ -4,7 +4,7 @@
 //! Nuvo's bake leaves a few islands of one to a few dozen faces where a chart's region frays (a
 //! face whose corners the networks assign to different charts, a sliver the injective pass
 //! detached). Each costs a seam all round it and a cell in the atlas for almost no surface. On the
-//! Common Shapes atlases 137 of 250 islands held under 0.2% of their mesh's area.
+//! Common Shapes atlases 128 of 250 islands held under 0.2% of their mesh's area.
 //! [`join_small_islands`] grows each such island's faces onto the neighbour it shares the longest
 //! edge with, face by face from their shared edges, and keeps the result only where it stays
 //! injective, so it never adds a flip or an overlap.
@@ -19,7 +19,9 @@
 //!   longest first (ties by the lower island index), at most [`MAX_NEIGHBOURS_TRIED`].
 //! - **Seeding**: every mesh vertex of a shared edge takes the neighbour's texture coordinate at
 //!   it, from the neighbour's face across that edge. When one vertex would take two different
-//!   values (the neighbour has its own seam there), the neighbour is not used.
+//!   values (the neighbour has its own seam there), or when the growth below fails its check,
+//!   the same is tried seeded from the longest shared edge alone (the island then joins across
+//!   that edge and its other shared edges stay seams), before the next neighbour.
 //! - **Growing**: faces of the small island with two corners placed and the third not are placed
 //!   breadth-first (in face order within each wave), the third corner on the side of the placed
 //!   edge that gives the face the neighbour's orientation (the sign of its summed signed UV
@@ -160,12 +162,12 @@ pub fn join_small_islands(mesh: &TriMesh, opts: &JoinOptions) -> Result<Joined, 
             }
         }
         shared.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
-        let tries = shared
-            .iter()
-            .take(MAX_NEIGHBOURS_TRIED)
-            .flat_map(|&(nb, _)| [(nb, Growth::Similar), (nb, Growth::Density)]);
-        for (nb, growth) in tries {
-            if let Some(placed) = work.try_join(&faces, nb, &edge_faces, growth) {
+        let tries = shared.iter().take(MAX_NEIGHBOURS_TRIED).flat_map(|&(nb, _)| {
+            [Seeds::All, Seeds::Longest]
+                .map(|seeds| [(nb, Growth::Similar, seeds), (nb, Growth::Density, seeds)])
+        });
+        for (nb, growth, seeds) in tries.flatten() {
+            if let Some(placed) = work.try_join(&faces, nb, &edge_faces, growth, seeds) {
                 work.commit(s, nb, &faces, placed);
                 report.joined += 1;
                 report.joined_faces += faces.len();
@@ -201,6 +203,15 @@ struct Placed {
     new_values: Vec<[f64; 2]>,
 }
 
+/// Which shared edges seed the growth (module docs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Seeds {
+    /// Every edge the small island shares with the neighbour.
+    All,
+    /// The longest of them only: the rest become seams inside the joined island.
+    Longest,
+}
+
 /// How a grown face's free corner is placed from its placed edge (module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Growth {
@@ -230,6 +241,7 @@ impl Work<'_> {
         nb: u32,
         edge_faces: &HashMap<(u32, u32), Vec<(u32, usize)>>,
         growth: Growth,
+        seeds: Seeds,
     ) -> Option<Placed> {
         let nb_faces = &self.members[nb as usize];
         let signed: f64 = nb_faces.iter().map(|&g| self.uv_area2(self.tris[g as usize])).sum();
@@ -241,28 +253,39 @@ impl Work<'_> {
         let nb_area3: f64 = nb_faces.iter().map(|&g| self.area3[g as usize]).sum();
         let density = unsigned / nb_area3.max(f64::MIN_POSITIVE); // UV area per 3-D area
         let scale = density.sqrt(); // UV length per 3-D length
-        // Seeds: the neighbour's coordinate at each vertex of a shared edge.
-        let mut at: HashMap<u32, Corner> = HashMap::new();
-        let mut value: HashMap<u32, [f64; 2]> = HashMap::new();
+        // Seeds: the neighbour's coordinate at each vertex of a shared edge (or of the longest).
+        let mut shared: Vec<(u32, usize)> = Vec::new();
+        let mut longest: Option<(f64, (u32, usize))> = None;
         for &f in faces {
             let t = self.mesh.triangles[f as usize];
             for k in 0..3 {
                 let (a, b) = (t[k], t[(k + 1) % 3]);
+                let len = norm(sub(v3(self.mesh.positions[a as usize]), v3(self.mesh.positions[b as usize])));
                 for &(g, j) in &edge_faces[&(a.min(b), a.max(b))] {
-                    if self.label[g as usize] != nb {
-                        continue;
-                    }
-                    let (gt, gc) = (self.mesh.triangles[g as usize], self.tris[g as usize]);
-                    for (v, c) in [(gt[j], gc[j]), (gt[(j + 1) % 3], gc[(j + 1) % 3])] {
-                        let p = self.coords[c as usize];
-                        match value.get(&v) {
-                            Some(q) if *q != p => return None,
-                            Some(_) => {}
-                            None => {
-                                value.insert(v, p);
-                                at.insert(v, Corner::Existing(c));
-                            }
+                    if self.label[g as usize] == nb {
+                        shared.push((g, j));
+                        if longest.is_none_or(|(l, _)| len > l) {
+                            longest = Some((len, (g, j)));
                         }
+                    }
+                }
+            }
+        }
+        if seeds == Seeds::Longest {
+            shared = longest.map(|(_, e)| vec![e]).unwrap_or_default();
+        }
+        let mut at: HashMap<u32, Corner> = HashMap::new();
+        let mut value: HashMap<u32, [f64; 2]> = HashMap::new();
+        for &(g, j) in &shared {
+            let (gt, gc) = (self.mesh.triangles[g as usize], self.tris[g as usize]);
+            for (v, c) in [(gt[j], gc[j]), (gt[(j + 1) % 3], gc[(j + 1) % 3])] {
+                let p = self.coords[c as usize];
+                match value.get(&v) {
+                    Some(q) if *q != p => return None,
+                    Some(_) => {}
+                    None => {
+                        value.insert(v, p);
+                        at.insert(v, Corner::Existing(c));
                     }
                 }
             }
