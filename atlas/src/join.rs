@@ -641,6 +641,61 @@ mod tests {
     }
 
     #[test]
+    fn an_island_at_its_neighbours_own_seam_joins_across_one_edge() {
+        // A 3 × 3 grid of unit squares on UVs 0.1 · (x, y): the centre square is an island of its
+        // own (shifted UVs), the ring round it is one island cut open along the edge from (0, 1) to
+        // (1, 1), where the square left of the centre has its corner (1, 1) on a coordinate of its
+        // own, nudged into that square. Seeded from all four shared edges, the centre's corner
+        // (1, 1) would take two values: refused. Seeded from one edge and grown, it joins.
+        let v = |i: u32, j: u32| i * 4 + j;
+        let mut positions = Vec::new();
+        for i in 0..4 {
+            for j in 0..4 {
+                positions.push([i as f32, j as f32, 0.0]);
+            }
+        }
+        let mut coords: Vec<[f32; 2]> = positions.iter().map(|p| [0.1 * p[0], 0.1 * p[1]]).collect();
+        let nudged = coords.len() as u32;
+        coords.push([0.1 - 0.005, 0.1 + 0.005]);
+        let centre = coords.len() as u32;
+        coords.extend([[5.1, 5.1], [5.2, 5.1], [5.2, 5.2], [5.1, 5.2]]);
+        let (mut triangles, mut uvt) = (Vec::new(), Vec::new());
+        for i in 0..3 {
+            for j in 0..3 {
+                let (a, b, c, d) = (v(i, j), v(i + 1, j), v(i + 1, j + 1), v(i, j + 1));
+                for t in [[a, b, c], [a, c, d]] {
+                    triangles.push(t);
+                    uvt.push(if (i, j) == (1, 1) {
+                        t.map(|x| centre + [a, b, c, d].iter().position(|&y| y == x).unwrap() as u32)
+                    } else if (i, j) == (0, 1) {
+                        t.map(|x| if x == v(1, 1) { nudged } else { x })
+                    } else {
+                        t
+                    });
+                }
+            }
+        }
+        let m = TriMesh { positions, triangles, uv: Some(UvLayer { coords, triangles: uvt }) };
+        assert_eq!(uv_charts(&m, m.uv.as_ref().unwrap()).1, 2);
+        let out = join_small_islands(&m, &JoinOptions { max_area_share: 0.2 }).unwrap();
+        assert_eq!((out.report.small, out.report.joined, out.report.joined_faces), (1, 1, 2));
+        let uv = out.mesh.uv.as_ref().unwrap();
+        assert_eq!(uv_charts(&out.mesh, uv).1, 1);
+        // The centre is grown where the grid has it (similar to its 3-D shape, at the seed
+        // edge's scale).
+        for f in [8, 9] {
+            for k in 0..3 {
+                let p = m.positions[m.triangles[f][k] as usize];
+                let q = uv.coords[uv.triangles[f][k] as usize];
+                assert!(
+                    (q[0] - 0.1 * p[0]).abs() < 1e-6 && (q[1] - 0.1 * p[1]).abs() < 1e-6,
+                    "{q:?} vs {p:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
     fn a_large_island_is_not_small() {
         let m = strip_with_a_detached_square(4, [0.5, 0.5]);
         let out = join_small_islands(&m, &JoinOptions::default()).unwrap();
