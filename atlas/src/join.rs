@@ -56,7 +56,8 @@ use serde::Serialize;
 
 use crate::error::AtlasError;
 use crate::injective::{TriangleGrid, mean_edge};
-use crate::partuv::area_distortion;
+use crate::partuv::{area_distortion, face_areas_3d};
+use crate::refine::area2;
 use crate::uvstats::{require_uv, uv_islands};
 use crate::vecmath::{cross, norm, sub, v3};
 
@@ -115,15 +116,9 @@ pub struct Joined {
 /// Errors ([`AtlasError`]): the mesh has no UVs or an index out of range.
 pub fn join_small_islands(mesh: &TriMesh, opts: &JoinOptions) -> Result<Joined, AtlasError> {
     let uv = require_uv(mesh)?;
-    mesh.validate().map_err(|e| AtlasError::invalid("mesh", e.to_string()))?;
     let islands = uv_islands(mesh, uv);
     let n = islands.len();
-    let area3: Vec<f64> = (0..mesh.triangles.len())
-        .map(|f| {
-            let [a, b, c] = mesh.corners(f).map(v3);
-            0.5 * norm(cross(sub(b, a), sub(c, a)))
-        })
-        .collect();
+    let area3 = face_areas_3d(mesh);
     let total: f64 = area3.iter().sum();
     let island_area: Vec<f64> =
         islands.iter().map(|fs| fs.iter().map(|&f| area3[f as usize]).sum()).collect();
@@ -146,7 +141,7 @@ pub fn join_small_islands(mesh: &TriMesh, opts: &JoinOptions) -> Result<Joined, 
     }
     let mut work = Work {
         mesh,
-        area3: area3.clone(),
+        area3,
         coords: uv.coords.iter().map(|p| p.map(f64::from)).collect(),
         tris: uv.triangles.clone(),
         members: islands,
@@ -275,8 +270,7 @@ enum Corner {
 
 impl Work<'_> {
     fn uv_area2(&self, t: [u32; 3]) -> f64 {
-        let [a, b, c] = t.map(|i| self.coords[i as usize]);
-        (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+        area2(t.map(|i| self.coords[i as usize]))
     }
 
     /// The faces `faces` grown onto island `nb` and checked (module docs), `None` when they cannot
@@ -400,8 +394,7 @@ impl Work<'_> {
             faces.iter().map(|&f| self.mesh.triangles[f as usize].map(|v| value[&v])).collect();
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
         for (t, &f) in joined.iter().zip(faces) {
-            let [a, b, c] = *t;
-            let area2 = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+            let area2 = area2(*t);
             if area2 * orient <= min_area2 {
                 return None;
             }
@@ -440,11 +433,7 @@ impl Work<'_> {
         let area_uv: Vec<f64> = nb_faces
             .iter()
             .map(|&g| self.uv_area2(self.tris[g as usize]).abs())
-            .chain(
-                joined
-                    .iter()
-                    .map(|&[a, b, c]| ((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])).abs()),
-            )
+            .chain(joined.iter().map(|&t| area2(t).abs()))
             .collect();
         let set: Vec<u32> = (0..all.len() as u32).collect();
         let distortion = |n: usize| area_distortion(&area_3d, &area_uv, &set[..n]).value.unwrap_or(1.0);
@@ -521,6 +510,17 @@ mod tests {
         TriMesh { positions, triangles, uv: Some(UvLayer { coords, triangles: uvt }) }
     }
 
+    /// Asserts that the corners of `faces` have UVs `0.1 · (x, y)` of their positions, within `tol`.
+    fn assert_at_tenth_of_position(m: &TriMesh, uv: &UvLayer, faces: &[usize], tol: f32) {
+        for &f in faces {
+            for k in 0..3 {
+                let p = m.positions[m.triangles[f][k] as usize];
+                let q = uv.coords[uv.triangles[f][k] as usize];
+                assert!((q[0] - 0.1 * p[0]).abs() < tol && (q[1] - 0.1 * p[1]).abs() < tol, "{q:?} vs {p:?}");
+            }
+        }
+    }
+
     #[test]
     fn a_detached_square_grows_back_onto_its_strip() {
         let m = strip_with_a_detached_square(600, [0.5, 0.5]);
@@ -531,16 +531,7 @@ mod tests {
         assert_eq!(uv_charts(&out.mesh, uv).1, 1);
         // Grown isometrically at the strip's density: exactly where the strip would have it.
         let last = 2 * 600 - 1;
-        for f in [last - 1, last] {
-            for k in 0..3 {
-                let p = m.positions[m.triangles[f][k] as usize];
-                let q = uv.coords[uv.triangles[f][k] as usize];
-                assert!(
-                    (q[0] - 0.1 * p[0]).abs() < 1e-4 && (q[1] - 0.1 * p[1]).abs() < 1e-4,
-                    "{q:?} vs {p:?}"
-                );
-            }
-        }
+        assert_at_tenth_of_position(&m, uv, &[last - 1, last], 1e-4);
     }
 
     #[test]
@@ -683,16 +674,7 @@ mod tests {
         assert_eq!(uv_charts(&out.mesh, uv).1, 1);
         // The centre is grown where the grid has it (similar to its 3-D shape, at the seed
         // edge's scale).
-        for f in [8, 9] {
-            for k in 0..3 {
-                let p = m.positions[m.triangles[f][k] as usize];
-                let q = uv.coords[uv.triangles[f][k] as usize];
-                assert!(
-                    (q[0] - 0.1 * p[0]).abs() < 1e-6 && (q[1] - 0.1 * p[1]).abs() < 1e-6,
-                    "{q:?} vs {p:?}"
-                );
-            }
-        }
+        assert_at_tenth_of_position(&m, uv, &[8, 9], 1e-6);
     }
 
     #[test]

@@ -178,7 +178,7 @@ impl AtlasSquare {
 }
 
 /// The 3-D area of every face, in f64.
-fn face_areas_3d(mesh: &TriMesh) -> Vec<f64> {
+pub(crate) fn face_areas_3d(mesh: &TriMesh) -> Vec<f64> {
     (0..mesh.triangles.len())
         .into_par_iter()
         .map(|f| {

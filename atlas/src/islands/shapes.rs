@@ -112,13 +112,8 @@ pub(super) fn footprint(island: &Island, k: u32, t: f64) -> Footprint {
             mask[base + x as usize / 64] |= 1 << (x % 64);
         }
     };
-    let tris = island.tris.iter().map(|t| t.map(|i| local(q[i as usize])));
-    let tris: Box<dyn Iterator<Item = [[f64; 2]; 3]>> = if island.tris.is_empty() && !q.is_empty() {
-        Box::new(std::iter::once([local(q[0]); 3]))
-    } else {
-        Box::new(tris)
-    };
-    for tri in tris {
+    // Every island has a face (islands are sets of faces), so its footprint has a texel.
+    for tri in island.tris.iter().map(|t| t.map(|i| local(q[i as usize]))) {
         let ys = tri.map(|p| p[1]);
         let (y0, y1) = (
             ys.iter().copied().fold(f64::INFINITY, f64::min),
