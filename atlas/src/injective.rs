@@ -112,6 +112,14 @@ pub const LOOP_AREA_REL: f64 = 1e-9;
 /// stretch by 1.25 one way and 0.8 the other, is about 4.33.
 pub const SPLIT_ENERGY: f64 = 4.5;
 
+/// How far a face grown back over the bad ones (`Patch::grow`) may scale its rest shape, as a
+/// ratio of areas either way from the median ratio of the good faces. Unbounded, growth went
+/// wrong on a marching-cubes vase whose charts hold both sides of a thin wall: a bad face whose
+/// three corners were placed on the two sides spanned the gap, faces placed on its edges copied
+/// its scale, and the scale compounded face by face to 1e32, leaving 52,000 of an island's
+/// 58,000 faces specks once the island was scaled to its 3-D area (Stretch 0 on the vase).
+pub const GROW_SCALE: f64 = 100.0;
+
 /// Options of [`make_injective`].
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct InjectiveOptions {
@@ -957,27 +965,20 @@ impl Patch {
             .fold(f64::INFINITY, f64::min)
     }
 
-    /// Cuts a patch with several boundary loops along shortest paths (by rest edge length) from
-    /// each loop but the longest to another loop, until one loop is left (module docs); a patch
-    /// of genus 0 becomes a disc. Does nothing to a patch whose boundary cannot be followed.
+    /// Cuts a patch open into a disc (module docs, step 3): a closed patch along a slit, the
+    /// shortest path between two of its vertices farthest apart (by rest edge length); a patch
+    /// with several boundary loops along shortest paths from each loop but the longest to
+    /// another loop, until one loop is left. A patch of genus 0 becomes a disc. Does nothing to a
+    /// patch whose boundary cannot be followed.
     fn cut_to_disc(&mut self) {
+        if self.topology.manifold && self.topology.loops.is_empty() {
+            self.slit_open();
+        }
         for _ in 0..self.topology.loops.len() {
             if !self.topology.manifold || self.topology.loops.len() < 2 {
                 return;
             }
-            let mut length: HashMap<(u32, u32), f64> = HashMap::new();
-            let mut adj: Vec<Vec<(u32, f64)>> = vec![Vec::new(); self.n];
-            for (t, c) in self.live() {
-                for k in 0..3 {
-                    let (a, b) = (c[k], c[(k + 1) % 3]);
-                    let (xa, xb) = (self.rest[t].x[k], self.rest[t].x[(k + 1) % 3]);
-                    let l = (xb[0] - xa[0]).hypot(xb[1] - xa[1]);
-                    if length.insert((a.min(b), a.max(b)), l).is_none() {
-                        adj[a as usize].push((b, l));
-                        adj[b as usize].push((a, l));
-                    }
-                }
-            }
+            let (length, adj) = self.edge_graph();
             let loop_length = |l: &Vec<u32>| -> f64 {
                 (0..l.len())
                     .map(|i| length[&(l[i].min(l[(i + 1) % l.len()]), l[i].max(l[(i + 1) % l.len()]))])
@@ -997,44 +998,68 @@ impl Patch {
                     loop_of[v as usize] = li;
                 }
             }
-            // Dijkstra from the hole to the nearest vertex of another loop.
-            let mut dist = vec![f64::INFINITY; self.n];
-            let mut prev = vec![u32::MAX; self.n];
-            let mut heap = std::collections::BinaryHeap::new();
-            for &v in &self.topology.loops[hole] {
-                dist[v as usize] = 0.0;
-                heap.push((std::cmp::Reverse(OrdF64(0.0)), v));
-            }
-            let mut reached = None;
-            while let Some((std::cmp::Reverse(OrdF64(d)), v)) = heap.pop() {
-                if d > dist[v as usize] {
-                    continue;
-                }
-                if loop_of[v as usize] != usize::MAX && loop_of[v as usize] != hole {
-                    reached = Some(v);
-                    break;
-                }
-                for &(w, l) in &adj[v as usize] {
-                    let nd = d + l;
-                    if nd < dist[w as usize] && loop_of[w as usize] != hole {
-                        dist[w as usize] = nd;
-                        prev[w as usize] = v;
-                        heap.push((std::cmp::Reverse(OrdF64(nd)), w));
-                    }
-                }
-            }
-            let Some(mut v) = reached else { return };
-            let mut cut = std::collections::HashSet::new();
-            while prev[v as usize] != u32::MAX {
-                let u = prev[v as usize];
-                cut.insert((u.min(v), u.max(v)));
-                v = u;
-            }
-            let (corners, n) =
-                separate_fans(std::mem::take(&mut self.corners), &self.collapsed, self.n, &cut);
-            (self.corners, self.n) = (corners, n);
-            self.topology = self.topology();
+            // From the hole to the nearest vertex of another loop.
+            let (_, prev, reached) = shortest_paths(
+                &adj,
+                &self.topology.loops[hole],
+                |v| loop_of[v as usize] != usize::MAX && loop_of[v as usize] != hole,
+                |w| loop_of[w as usize] != hole,
+            );
+            let Some(v) = reached else { return };
+            self.cut_along(&prev, v);
         }
+    }
+
+    /// Cuts a closed patch along the shortest path between two vertices far apart: the farthest
+    /// from its first vertex, and the farthest from that one (module docs). The slit's two sides
+    /// become its one boundary loop.
+    fn slit_open(&mut self) {
+        let Some((_, first)) = self.live().next() else { return };
+        let (_, adj) = self.edge_graph();
+        let farthest = |dist: &[f64]| {
+            (0..dist.len() as u32)
+                .filter(|&v| dist[v as usize].is_finite())
+                .max_by(|&a, &b| dist[a as usize].total_cmp(&dist[b as usize]).then(b.cmp(&a)))
+        };
+        let (dist, _, _) = shortest_paths(&adj, &[first[0]], |_| false, |_| true);
+        let Some(a) = farthest(&dist) else { return };
+        let (dist, prev, _) = shortest_paths(&adj, &[a], |_| false, |_| true);
+        match farthest(&dist) {
+            Some(b) if b != a => self.cut_along(&prev, b),
+            _ => {}
+        }
+    }
+
+    /// Every edge of the live faces with its rest length, and the adjacency lists it makes.
+    fn edge_graph(&self) -> (HashMap<(u32, u32), f64>, Vec<Vec<(u32, f64)>>) {
+        let mut length: HashMap<(u32, u32), f64> = HashMap::new();
+        let mut adj: Vec<Vec<(u32, f64)>> = vec![Vec::new(); self.n];
+        for (t, c) in self.live() {
+            for k in 0..3 {
+                let (a, b) = (c[k], c[(k + 1) % 3]);
+                let (xa, xb) = (self.rest[t].x[k], self.rest[t].x[(k + 1) % 3]);
+                let l = (xb[0] - xa[0]).hypot(xb[1] - xa[1]);
+                if length.insert((a.min(b), a.max(b)), l).is_none() {
+                    adj[a as usize].push((b, l));
+                    adj[b as usize].push((a, l));
+                }
+            }
+        }
+        (length, adj)
+    }
+
+    /// Cuts the edges of the path that `prev` leads along from `end` back to its source, then
+    /// takes the topology again.
+    fn cut_along(&mut self, prev: &[u32], mut v: u32) {
+        let mut cut = std::collections::HashSet::new();
+        while prev[v as usize] != u32::MAX {
+            let u = prev[v as usize];
+            cut.insert((u.min(v), u.max(v)));
+            v = u;
+        }
+        let (corners, n) = separate_fans(std::mem::take(&mut self.corners), &self.collapsed, self.n, &cut);
+        (self.corners, self.n) = (corners, n);
+        self.topology = self.topology();
     }
 
     /// The faces joined across edges that exactly two live faces use in opposite directions, as
@@ -1117,6 +1142,16 @@ impl Patch {
             return (bad, q);
         }
         let mut grid = TriangleGrid::new(&good, mean_edge(&good));
+        let ratio = |t: usize, tri: [[f64; 2]; 3]| area2(tri) / area2(self.rest[t].x);
+        let mut ratios: Vec<f64> =
+            good.iter().filter(|&&(t, _)| self.rest[t].real).map(|&(t, tri)| ratio(t, tri)).collect();
+        let median = if ratios.is_empty() {
+            1.0
+        } else {
+            let mid = ratios.len() / 2;
+            *ratios.select_nth_unstable_by(mid, f64::total_cmp).1
+        };
+        let (low, high) = (median / GROW_SCALE, median * GROW_SCALE);
         let mut queue: std::collections::VecDeque<u32> = std::collections::VecDeque::new();
         for (t, c) in self.live() {
             if bad[t] && c.iter().filter(|&&v| placed[v as usize]).count() >= 2 {
@@ -1157,6 +1192,7 @@ impl Patch {
             };
             if !is_positive(area2(tri))
                 || tri.iter().flatten().any(|x| !x.is_finite())
+                || (self.rest[t].real && !(low..=high).contains(&ratio(t, tri)))
                 || !grid.overlapping(tri).is_empty()
             {
                 continue;
@@ -1499,6 +1535,41 @@ fn triangles_overlap(a: [[f64; 2]; 3], b: [[f64; 2]; 3]) -> bool {
         })
     };
     !separated(a, b) && !separated(b, a)
+}
+
+/// Dijkstra over `adj` from the `sources` (distance 0), entering only vertices `may_enter`
+/// accepts; stops at the first vertex popped that `is_target` accepts. Returns the distances,
+/// each vertex's predecessor (`u32::MAX` for sources and unreached ones) and the target reached.
+fn shortest_paths(
+    adj: &[Vec<(u32, f64)>],
+    sources: &[u32],
+    is_target: impl Fn(u32) -> bool,
+    may_enter: impl Fn(u32) -> bool,
+) -> (Vec<f64>, Vec<u32>, Option<u32>) {
+    let mut dist = vec![f64::INFINITY; adj.len()];
+    let mut prev = vec![u32::MAX; adj.len()];
+    let mut heap = std::collections::BinaryHeap::new();
+    for &v in sources {
+        dist[v as usize] = 0.0;
+        heap.push((std::cmp::Reverse(OrdF64(0.0)), v));
+    }
+    while let Some((std::cmp::Reverse(OrdF64(d)), v)) = heap.pop() {
+        if d > dist[v as usize] {
+            continue;
+        }
+        if is_target(v) {
+            return (dist, prev, Some(v));
+        }
+        for &(w, l) in &adj[v as usize] {
+            let nd = d + l;
+            if nd < dist[w as usize] && may_enter(w) {
+                dist[w as usize] = nd;
+                prev[w as usize] = v;
+                heap.push((std::cmp::Reverse(OrdF64(nd)), w));
+            }
+        }
+    }
+    (dist, prev, None)
 }
 
 /// An `f64` ordered by [`f64::total_cmp`], for the Dijkstra heap.

@@ -12,7 +12,12 @@
 //!   In the output every island has its own texture coordinates: corners of one island that shared
 //!   a coordinate still do, corners of two islands never do.
 //! - **Areas**: an island's UV area is the sum of its faces' *unsigned* UV areas (flipped faces
-//!   count, they do not cancel), its 3-D area the sum of its faces' areas (both in `f64`).
+//!   count, they do not cancel) over the faces that are not degenerate in 3-D
+//!   ([`crate::uvstats`]), its 3-D area the sum of its faces' areas (both in `f64`). A face
+//!   without 3-D area has no texel density of its own: the zero-area faces of a marching-cubes
+//!   mesh (a seventh of some islands) get well-shaped UV triangles from
+//!   [`crate::injective`], and counting their UV area would shrink the real faces of their
+//!   island against every other island's.
 //! - **Texel density**: every island is scaled uniformly by `scale · sqrt(area_3d / area_uv)`, so
 //!   its new UV area is `scale² · area_3d`: one common `scale` ([`PackedIslands::scale`], UV units
 //!   per 3-D unit of length) for the whole atlas.
@@ -81,7 +86,7 @@ use rayon::prelude::*;
 use nuvo_geometry::{TriMesh, UvLayer};
 
 use crate::error::AtlasError;
-use crate::uvstats::{DEGENERATE_AREA_REL, face_uv_area2, require_uv, uv_charts};
+use crate::uvstats::{DEGENERATE_AREA_REL, degenerate_3d_faces, face_uv_area2, require_uv, uv_charts};
 use crate::vecmath::{cross, norm, sub, v3};
 
 mod shapes;
@@ -210,13 +215,17 @@ impl Layout {
         let mut area_uv = vec![0.0f64; n];
         let mut area_3d = vec![0.0f64; n];
         let mut metrics: Vec<Vec<[f64; 3]>> = vec![Vec::new(); n];
+        let degenerate_3d = degenerate_3d_faces(mesh);
         let triangles: Vec<[u32; 3]> = uv
             .triangles
             .iter()
             .enumerate()
             .map(|(f, t)| {
                 let i = island_of_face[f];
-                area_uv[i as usize] += face_uv_area2(uv, f).abs() * 0.5;
+                // A face without 3-D area has no texel density to match (module docs).
+                if !degenerate_3d[f] {
+                    area_uv[i as usize] += face_uv_area2(uv, f).abs() * 0.5;
+                }
                 let [a, b, c] = mesh.corners(f).map(v3);
                 area_3d[i as usize] += 0.5 * norm(cross(sub(b, a), sub(c, a)));
                 if let Some(g) = face_metric([a, b, c], t.map(|j| uv.coords[j as usize])) {

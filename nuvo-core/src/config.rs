@@ -265,6 +265,13 @@ pub struct OutputConfig {
     /// "islands"`, which places the new islands; with `"squares"` such an island keeps its UVs).
     /// Off by default (the paper's bake); `nuvo unwrap` turns it on for clean meshes.
     pub injective: bool,
+    /// With `injective`: the symmetric Dirichlet energy per unit area above which an island
+    /// re-embedded as a disc is split into parts instead (`nuvo_atlas::injective::SPLIT_ENERGY`,
+    /// 4.5, by default). `inf` never splits a disc: on a marching-cubes mesh most islands are
+    /// floaters and crumbs, closed blobs whose every split is a seam in the renders while their
+    /// distortion barely moves the scores' medians, so `nuvo unwrap` sets it there (BENCHMARKS.md,
+    /// "Injective islands on fragmented meshes").
+    pub injective_split_energy: f64,
     /// Join small islands into a neighbouring island and smooth the seams (not in the paper;
     /// `nuvo_atlas::join`): an island under 0.2% of the surface grows onto the neighbour it shares
     /// the longest edge with, and a face with two edges on a seam moves across it, wherever the
@@ -297,6 +304,7 @@ impl Default for OutputConfig {
             untangle: false,
             refine: false,
             injective: false,
+            injective_split_energy: nuvo_atlas::injective::SPLIT_ENERGY,
             join: false,
             packing: Packing::Squares,
             eval_views: 16,
@@ -702,6 +710,12 @@ impl ExperimentConfig {
         }
         if !(out.round_trip_tolerance.is_finite() && out.round_trip_tolerance >= 0.0) {
             return Err(src.invalid("output.round_trip_tolerance", "must be 0 (off) or a positive fraction"));
+        }
+        if !(out.injective_split_energy > 0.0) {
+            return Err(src.invalid(
+                "output.injective_split_energy",
+                "must be a positive energy per unit area (4 is an isometry) or inf (never split)",
+            ));
         }
         if out.gutter.saturating_mul(4) >= out.atlas_resolution {
             return Err(

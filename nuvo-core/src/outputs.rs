@@ -129,7 +129,10 @@ fn finish_layout(mesh: TriMesh, opts: &OutputConfig) -> Result<(TriMesh, LayoutS
     if opts.injective {
         // Split parts lie on each other until packed, so only island packing may split.
         let split = opts.packing == Packing::Islands;
-        let injective = make_injective(&mesh, &InjectiveOptions { split, ..Default::default() })?;
+        let injective = make_injective(
+            &mesh,
+            &InjectiveOptions { split, split_energy: opts.injective_split_energy, ..Default::default() },
+        )?;
         mesh = injective.mesh;
         summary.injective = Some(injective.report);
     }

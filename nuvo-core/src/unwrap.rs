@@ -7,7 +7,8 @@
 //! 2. for meshes, [`profile_mesh`] and [`choose_sampling`]: area-uniform samples for a clean
 //!    surface, visible ray hits for a fragmented one or one with hidden inner sheets;
 //! 3. [`recipe`]: the config text (the measured recipe of `configs/bunny.toml`, with the options
-//!    that hurt on fragmented meshes off for them);
+//!    that hurt on fragmented meshes off for them, and injective islands that are never split
+//!    on them);
 //! 4. [`chart_trials`] and [`choose_charts`]: the chart count, from how well `n` projection charts
 //!    can start the surface fold-free;
 //! 5. [`fit_steps`]: the step count that fits the time budget on this machine, from timed steps.
@@ -234,9 +235,15 @@ pub fn recipe(r: &RecipeInput) -> String {
     let warm = (r.steps * 3 / 10).clamp(1, 300);
     let mut bake = String::from("refine = true\npacking = \"islands\"\n");
     if clean {
-        // Injectivity holds on clean meshes at a small cost in Editability; on marching-cubes
-        // meshes its new seams cost far more (BENCHMARKS.md, "Injective islands").
-        bake += "round_trip_tolerance = 0.1\nuntangle = true\ninjective = true\njoin = true\n";
+        bake += "round_trip_tolerance = 0.1\nuntangle = true\n";
+    }
+    // Every island is made injective and small islands joined. On fragmented inputs (floaters,
+    // crumbs) a re-embedded island is never split: each split is a seam across a blob that the
+    // renders see, while its distortion barely moves the medians (BENCHMARKS.md, "Injective
+    // islands on fragmented meshes").
+    bake += "injective = true\njoin = true\n";
+    if !clean {
+        bake += "injective_split_energy = inf\n";
     }
     let stop =
         r.stop_after_seconds.map(|s| format!("time_budget_minutes = {}\n", s / 60.0)).unwrap_or_default();
@@ -503,7 +510,7 @@ mod tests {
     }
 
     #[test]
-    fn the_recipe_is_a_valid_config_and_turns_bake_fixes_off_for_fragmented_meshes() {
+    fn the_recipe_is_a_valid_config_and_fits_the_bake_to_fragmented_meshes() {
         let path = Path::new("/data/x.obj");
         let base = RecipeInput {
             kind: InputKind::Mesh,
@@ -520,6 +527,7 @@ mod tests {
         assert_eq!((clean.model.charts, clean.training.steps, clean.seed), (5, 900, 3));
         assert!(clean.output.untangle && clean.output.round_trip_tolerance > 0.0 && clean.output.injective);
         assert!(clean.output.join);
+        assert_eq!(clean.output.injective_split_energy, nuvo_atlas::injective::SPLIT_ENERGY);
         assert_eq!(clean.training.time_budget_minutes, Some(1.5));
         assert_eq!(clean.warm_start.unwrap().steps, 270);
         let flipped = RecipeInput { flip_normals: true, ..base };
@@ -528,8 +536,9 @@ mod tests {
         assert!(!clean.geometry.options.contains_key("flip_normals"));
         let unruly = RecipeInput { sampling: SamplingMode::Visible, ..base };
         let c = crate::config::from_str("unruly", &recipe(&unruly)).unwrap().config;
-        assert!(!c.output.untangle && c.output.round_trip_tolerance == 0.0 && !c.output.injective);
-        assert!(!c.output.join);
+        assert!(!c.output.untangle && c.output.round_trip_tolerance == 0.0);
+        assert!(c.output.injective && c.output.join, "injective islands everywhere");
+        assert_eq!(c.output.injective_split_energy, f64::INFINITY, "no splits of fragments' discs");
         assert!(c.output.refine, "refinement holds everywhere");
         assert_eq!(c.geometry.options["sampling"].as_str(), Some("visible"));
         let grid = RecipeInput {
