@@ -14,8 +14,10 @@
 //!    (symmetrised mean-value weights) with everything else fixed; the first injective result is
 //!    kept. This mends a fold inside a chart without a new seam.
 //! 3. **Re-embed** the island as a disc: islands with several boundary loops are first cut open
-//!    along shortest edge paths from each loop but the longest to another loop (a genus-0 island
-//!    becomes a disc); the start is the **Tutte embedding** (mean-value weights, symmetrised;
+//!    along shortest edge paths from each loop but the longest to another loop, and a closed
+//!    island (no boundary: a floater of a marching-cubes mesh) along a slit, the shortest path
+//!    between two vertices far apart (the farthest from its first vertex, and the farthest from
+//!    that one), so a genus-0 island becomes a disc with one seam; the start is the **Tutte embedding** (mean-value weights, symmetrised;
 //!    boundary on a circle by arc length), injective for any positive weights and a strictly
 //!    convex boundary (Floater 2003, "One-to-one piecewise linear mappings over
 //!    triangulations"), then SLIM (step 5). The result is kept when its symmetric Dirichlet energy
@@ -24,7 +26,8 @@
 //! 4. **Split** (`split`): otherwise the bad faces of the current map are **detached**: the good
 //!    faces keep their map and grow back over the bad ones breadth-first (`Patch::grow`: a bad
 //!    face joins when it can be placed, by its rest shape on an edge already placed, as a positive
-//!    triangle over no good face); what stays bad, and each connected piece of the good faces,
+//!    triangle over no good face, whose UV-to-rest area ratio is within [`GROW_SCALE`] of the
+//!    good faces' median either way); what stays bad, and each connected piece of the good faces,
 //!    becomes a part that goes back to step 1 with the positions it had. An island with no current
 //!    map to detach from, or whose faces are all bad, is cut into its pieces of consistent winding
 //!    and manifold edges or, when it is one, into two halves grown breadth-first from two far-apart
@@ -113,12 +116,15 @@ pub const LOOP_AREA_REL: f64 = 1e-9;
 pub const SPLIT_ENERGY: f64 = 4.5;
 
 /// How far a face grown back over the bad ones (`Patch::grow`) may scale its rest shape, as a
-/// ratio of areas either way from the median ratio of the good faces. Unbounded, growth went
-/// wrong on a marching-cubes vase whose charts hold both sides of a thin wall: a bad face whose
-/// three corners were placed on the two sides spanned the gap, faces placed on its edges copied
-/// its scale, and the scale compounded face by face to 1e32, leaving 52,000 of an island's
-/// 58,000 faces specks once the island was scaled to its 3-D area (Stretch 0 on the vase).
-pub const GROW_SCALE: f64 = 100.0;
+/// ratio of areas either way from the median ratio of the good faces (4: twice or half the
+/// length). Unbounded, growth went wrong on a marching-cubes vase whose charts hold both sides
+/// of a thin wall: a bad face whose three corners were placed on the two sides spanned the gap,
+/// faces placed on its edges copied its scale, and the scale compounded face by face to 1e32,
+/// leaving 52,000 of an island's 58,000 faces specks once the island was scaled to its 3-D area
+/// (Stretch 0 on the vase). Measured on that vase's bake: a bound of 100 gives Stretch 0.33 and
+/// Editability 0.48, 4 gives 0.79 and 0.64; on the unruly bunny 0.8268 against 0.8236
+/// (BENCHMARKS.md, "Injective islands on fragmented meshes").
+pub const GROW_SCALE: f64 = 4.0;
 
 /// Options of [`make_injective`].
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -1031,7 +1037,7 @@ impl Patch {
     }
 
     /// Every edge of the live faces with its rest length, and the adjacency lists it makes.
-    fn edge_graph(&self) -> (HashMap<(u32, u32), f64>, Vec<Vec<(u32, f64)>>) {
+    fn edge_graph(&self) -> (HashMap<(u32, u32), f64>, Adjacency) {
         let mut length: HashMap<(u32, u32), f64> = HashMap::new();
         let mut adj: Vec<Vec<(u32, f64)>> = vec![Vec::new(); self.n];
         for (t, c) in self.live() {
@@ -1536,6 +1542,9 @@ fn triangles_overlap(a: [[f64; 2]; 3], b: [[f64; 2]; 3]) -> bool {
     };
     !separated(a, b) && !separated(b, a)
 }
+
+/// Per vertex, its neighbours and the rest lengths of the edges to them.
+type Adjacency = Vec<Vec<(u32, f64)>>;
 
 /// Dijkstra over `adj` from the `sources` (distance 0), entering only vertices `may_enter`
 /// accepts; stops at the first vertex popped that `is_target` accepts. Returns the distances,
@@ -2189,6 +2198,76 @@ mod tests {
         );
         assert_eq!(flips_and_overlaps(&out.mesh), (0, 0));
         assert!(r.energy_after < 4.05, "each part of a tube is developable: {r:?}");
+    }
+
+    /// A closed UV sphere of `rings` × `segments` quads (poles as fans) with the UVs of its
+    /// orthographic projection onto the xy-plane: its back lies on its front, mirrored.
+    fn projected_sphere(rings: u32, segments: u32) -> TriMesh {
+        let mut positions = vec![[0.0f32, 0.0, 1.0]];
+        for r in 1..rings {
+            let theta = std::f64::consts::PI * r as f64 / rings as f64;
+            for k in 0..segments {
+                let phi = std::f64::consts::TAU * k as f64 / segments as f64;
+                let p = [theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos()];
+                positions.push(p.map(|x| x as f32));
+            }
+        }
+        positions.push([0.0, 0.0, -1.0]);
+        let (north, south) = (0, positions.len() as u32 - 1);
+        let id = |r: u32, k: u32| 1 + (r - 1) * segments + k % segments;
+        let mut triangles = Vec::new();
+        for k in 0..segments {
+            triangles.push([north, id(1, k), id(1, k + 1)]);
+            triangles.push([south, id(rings - 1, k + 1), id(rings - 1, k)]);
+            for r in 1..rings - 1 {
+                triangles.push([id(r, k), id(r + 1, k), id(r + 1, k + 1)]);
+                triangles.push([id(r, k), id(r + 1, k + 1), id(r, k + 1)]);
+            }
+        }
+        let coords = positions.iter().map(|p| [p[0], p[1]]).collect();
+        TriMesh { positions, uv: Some(UvLayer { coords, triangles: triangles.clone() }), triangles }
+    }
+
+    #[test]
+    fn a_closed_blob_is_slit_open_into_one_island_when_discs_are_never_split() {
+        let m = projected_sphere(8, 12);
+        let before = analyse_uv(&m, None, 1024).unwrap().stats;
+        assert_eq!(before.charts, 1);
+        assert!(before.flipped_faces > 0 && before.overlapping_faces > 0, "{before:?}");
+        let opts = InjectiveOptions { split_energy: f64::INFINITY, ..Default::default() };
+        let out = make_injective(&m, &opts).unwrap();
+        let r = &out.report;
+        assert_eq!((r.not_disc, r.not_injective_after, r.split), (1, 0, 0), "{r:?}");
+        assert_eq!((r.islands_after, r.reembedded), (1, 1), "one slit, one island: {r:?}");
+        assert_eq!(flips_and_overlaps(&out.mesh), (0, 0));
+        // The slit runs between two far-apart vertices: on a sphere, pole to pole at most (half
+        // the circumference, π), so its two sides are the island's whole boundary.
+        let boundary = analyse_uv(&out.mesh, None, 1024).unwrap().stats;
+        assert_eq!(boundary.charts, 1);
+        // With the default threshold a sphere, which no disc maps without distortion, is split.
+        let split = make_injective(&m, &InjectiveOptions::default()).unwrap().report;
+        assert!(split.islands_after > 1 && split.not_injective_after == 0, "{split:?}");
+    }
+
+    #[test]
+    fn growing_back_does_not_span_a_gap() {
+        // A strip whose right half jumps away in UV (as a network's chart jumps across a thin
+        // wall): the middle column of faces, marked bad, has every corner placed by good faces on
+        // both sides. Without a gap it grows back; across a wide gap it would be a giant face,
+        // and faces placed on its edges would copy its scale.
+        let n = 16;
+        for (shift, grows) in [(0.0, true), (20.0, false)] {
+            let m = strip(n, 4, |s, t| [s, t, 0.0], |s, t| if s <= 0.5 { [s, t] } else { [s + shift, t] });
+            let (uv, degenerate, opts) =
+                (m.uv.as_ref().unwrap(), degenerate_3d_faces(&m), Default::default());
+            let ctx = Ctx { mesh: &m, uv, degenerate: &degenerate, opts: &opts };
+            let faces: Vec<u32> = (0..m.triangles.len() as u32).collect();
+            let patch = Patch::new(&ctx, &faces);
+            let p = patch.current(&ctx).unwrap();
+            let bad: Vec<bool> = (0..faces.len()).map(|f| (f / 2) as u32 % n == n / 2).collect();
+            let (still, _) = patch.grow(&bad, &p);
+            assert_eq!(still.contains(&true), !grows, "shift {shift}");
+        }
     }
 
     #[test]

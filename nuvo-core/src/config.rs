@@ -711,7 +711,7 @@ impl ExperimentConfig {
         if !(out.round_trip_tolerance.is_finite() && out.round_trip_tolerance >= 0.0) {
             return Err(src.invalid("output.round_trip_tolerance", "must be 0 (off) or a positive fraction"));
         }
-        if !(out.injective_split_energy > 0.0) {
+        if out.injective_split_energy.is_nan() || out.injective_split_energy <= 0.0 {
             return Err(src.invalid(
                 "output.injective_split_energy",
                 "must be a positive energy per unit area (4 is an isometry) or inf (never split)",
@@ -817,6 +817,24 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("packing") && e.contains("islands"), "{e}");
+    }
+
+    #[test]
+    fn injective_split_energy_defaults_to_the_atlas_threshold_takes_inf_and_is_checked() {
+        let out = |extra: &str| from_str("c.toml", &format!("{MINIMAL}[output]\n{extra}"));
+        assert_eq!(out("").unwrap().config.output.injective_split_energy, 4.5);
+        let c = out("injective_split_energy = inf\n").unwrap().config;
+        assert_eq!(c.output.injective_split_energy, f64::INFINITY);
+        // It survives the resolved config that `nuvo unwrap` writes and `nuvo train` reads.
+        let text = toml::to_string(&c).unwrap();
+        assert_eq!(
+            from_str("again.toml", &text).unwrap().config.output.injective_split_energy,
+            f64::INFINITY
+        );
+        for bad in ["0.0", "-1.0", "nan"] {
+            let e = out(&format!("injective_split_energy = {bad}\n")).unwrap_err();
+            assert!(e.to_string().contains("output.injective_split_energy"), "{bad}: {e}");
+        }
     }
 
     #[test]
