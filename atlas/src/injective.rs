@@ -17,8 +17,8 @@
 //!    along shortest edge paths from each loop but the longest to another loop, and a closed
 //!    island (no boundary: a floater of a marching-cubes mesh) along a slit, the shortest path
 //!    between two vertices far apart (the farthest from its first vertex, and the farthest from
-//!    that one), so a genus-0 island becomes a disc with one seam; the start is the **Tutte embedding** (mean-value weights, symmetrised;
-//!    boundary on a circle by arc length), injective for any positive weights and a strictly
+//!    that one), so a genus-0 island becomes a disc; the start is the **Tutte embedding**
+//!    (mean-value weights, symmetrised; boundary on a circle by arc length), injective for any positive weights and a strictly
 //!    convex boundary (Floater 2003, "One-to-one piecewise linear mappings over
 //!    triangulations"), then SLIM (step 5). The result is kept when its symmetric Dirichlet energy
 //!    per unit area is at most [`SPLIT_ENERGY`], or when splitting is not allowed or the island
@@ -1039,7 +1039,7 @@ impl Patch {
     /// Every edge of the live faces with its rest length, and the adjacency lists it makes.
     fn edge_graph(&self) -> (HashMap<(u32, u32), f64>, Adjacency) {
         let mut length: HashMap<(u32, u32), f64> = HashMap::new();
-        let mut adj: Vec<Vec<(u32, f64)>> = vec![Vec::new(); self.n];
+        let mut adj: Adjacency = vec![Vec::new(); self.n];
         for (t, c) in self.live() {
             for k in 0..3 {
                 let (a, b) = (c[k], c[(k + 1) % 3]);
@@ -1054,7 +1054,7 @@ impl Patch {
         (length, adj)
     }
 
-    /// Cuts the edges of the path that `prev` leads along from `end` back to its source, then
+    /// Cuts the edges of the path that `prev` leads along from `v` back to its source, then
     /// takes the topology again.
     fn cut_along(&mut self, prev: &[u32], mut v: u32) {
         let mut cut = std::collections::HashSet::new();
