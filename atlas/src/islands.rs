@@ -15,7 +15,7 @@
 //!   count, they do not cancel) over the faces that are not degenerate in 3-D
 //!   ([`crate::uvstats`]), its 3-D area the sum of its faces' areas (both in `f64`). A face
 //!   without 3-D area has no texel density of its own: the zero-area faces of a marching-cubes
-//!   mesh (a seventh of some islands) get well-shaped UV triangles from
+//!   mesh (about 7% of an island's faces on the unruly meshes) get well-shaped UV triangles from
 //!   [`crate::injective`], and counting their UV area would shrink the real faces of their
 //!   island against every other island's.
 //! - **Texel density**: every island is scaled uniformly by `scale · sqrt(area_3d / area_uv)`, so
