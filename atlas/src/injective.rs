@@ -46,8 +46,11 @@
 //!    2017) whose triangles join the energy (rest shape: their shape at the round's start; total
 //!    weight [`SCAFFOLD_WEIGHT`] of the island's) and the line search: as two parts of the boundary
 //!    approach, the triangles between them are squeezed and push back, so the iteration slides on
-//!    instead of stalling. Where the boundary cannot be triangulated (two boundary vertices at one
-//!    point, a closed slit) the round runs without it. The rounds stop after
+//!    instead of stalling. Boundary unknowns at one point (an island touching itself, as the
+//!    non-manifold vertices of marching-cubes meshes make it) move as one through every round and
+//!    are one point of the triangulation, and the two sides of a closed slit are one edge with no
+//!    scaffold on it; where the boundary still cannot be triangulated the round runs without a
+//!    scaffold. The rounds stop after
 //!    [`InjectiveOptions::iterations`], or when one lowers the energy by less than
 //!    [`InjectiveOptions::tolerance`] (relative).
 //!
@@ -915,10 +918,11 @@ impl Patch {
     /// the rounds taken.
     fn slim(&self, mut p: Vec<[f64; 2]>, opts: &InjectiveOptions) -> (Vec<[f64; 2]>, usize) {
         let Some(mut energy) = self.energy_of(&p, true) else { return (p, 0) };
-        let Some(mut system) = SlimSystem::new(self) else { return (p, 0) };
+        let glue = self.coincident_boundary(&p);
+        let Some(mut system) = SlimSystem::new(self, glue) else { return (p, 0) };
         let mut rounds = 0;
         for _ in 0..opts.iterations {
-            let scaffold = Scaffold::build(self, &p);
+            let scaffold = Scaffold::build(self, &p, &system.glue);
             let target = match &scaffold {
                 Some(sc) => system.global_scaffold(self, &p, sc),
                 None => system.global(self, &p),
@@ -961,6 +965,26 @@ impl Patch {
             }
         }
         (p, rounds)
+    }
+
+    /// Per unknown, the unknown it is glued to during SLIM: boundary unknowns at the very same
+    /// position share the lowest-numbered of them, every other unknown is its own. Why: the
+    /// networks' islands of a marching-cubes mesh touch themselves at boundary points (a
+    /// non-manifold vertex split into fans, two cuts meeting), and measured on one (homer made
+    /// unruly) such a point stopped SLIM on every large island at its first round: the scaffold
+    /// cannot triangulate two boundary vertices at one point, and without it any step moves the
+    /// two apart so that boundary segments cross. Moving together, they keep touching (which
+    /// covers no area twice) and the scaffold sees one point.
+    fn coincident_boundary(&self, p: &[[f64; 2]]) -> Vec<u32> {
+        let mut glue: Vec<u32> = (0..self.n as u32).collect();
+        let mut first: HashMap<(u64, u64), u32> = HashMap::new();
+        for v in 0..self.n {
+            if self.topology.on_boundary[v] {
+                let key = (p[v][0].to_bits(), p[v][1].to_bits());
+                glue[v] = *first.entry(key).or_insert(v as u32);
+            }
+        }
+        glue
     }
 
     /// The first `t > 0` at which some live face's signed area along `p + t d` reaches zero
@@ -1698,11 +1722,20 @@ struct Scaffold {
 impl Scaffold {
     /// The scaffold round `p`; `None` when the boundary cannot be triangulated as it is (two
     /// boundary vertices at one point, touching boundary segments, no boundary).
-    fn build(patch: &Patch, p: &[[f64; 2]]) -> Option<Scaffold> {
+    fn build(patch: &Patch, p: &[[f64; 2]], glue: &[u32]) -> Option<Scaffold> {
         use spade::handles::FixedVertexHandle;
         use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
         let loops = &patch.topology.loops;
-        let ids: Vec<u32> = loops.iter().flatten().copied().collect();
+        // One triangulation vertex per glued boundary point (`Patch::coincident_boundary`).
+        let mut ids: Vec<u32> = Vec::new();
+        let mut vertex_of: HashMap<u32, usize> = HashMap::new();
+        for &v in loops.iter().flatten() {
+            let g = glue[v as usize];
+            vertex_of.entry(g).or_insert_with(|| {
+                ids.push(g);
+                ids.len() - 1
+            });
+        }
         if ids.len() < 3 {
             return None;
         }
@@ -1722,14 +1755,22 @@ impl Scaffold {
         let mut vertices: Vec<Point2<f64>> =
             ids.iter().map(|&v| Point2::new(p[v as usize][0], p[v as usize][1])).collect();
         vertices.extend(corners.iter().map(|c| Point2::new(c[0], c[1])));
-        let mut edges = Vec::with_capacity(ids.len());
-        let mut offset = 0;
+        // Boundary edges between glued points, each once. An edge whose reverse is a boundary
+        // edge too is a closed slit: both its sides are the patch's, so no scaffold grows there.
+        let mut directed: Vec<[usize; 2]> = Vec::with_capacity(ids.len());
+        let mut seen = std::collections::HashSet::new();
         for l in loops {
             for i in 0..l.len() {
-                edges.push([offset + i, offset + (i + 1) % l.len()]);
+                let e = [l[i], l[(i + 1) % l.len()]].map(|v| vertex_of[&glue[v as usize]]);
+                if e[0] != e[1] && seen.insert(e) {
+                    directed.push(e);
+                }
             }
-            offset += l.len();
         }
+        let outer: Vec<[usize; 2]> =
+            directed.iter().copied().filter(|e| !seen.contains(&[e[1], e[0]])).collect();
+        let edges: Vec<[usize; 2]> =
+            directed.into_iter().filter(|e| e[0] < e[1] || !seen.contains(&[e[1], e[0]])).collect();
         let mut conflicts = 0usize;
         let cdt = ConstrainedDelaunayTriangulation::<Point2<f64>>::try_bulk_load_cdt(
             vertices,
@@ -1744,7 +1785,7 @@ impl Scaffold {
         // reachable from them without crossing a constraint.
         let mut scaffold = vec![false; cdt.num_all_faces()];
         let mut stack = Vec::new();
-        for e in &edges {
+        for e in &outer {
             let edge = cdt.get_edge_from_neighbors(
                 FixedVertexHandle::from_index(e[0]),
                 FixedVertexHandle::from_index(e[1]),
@@ -1862,15 +1903,20 @@ struct SlimSystem {
     /// `row ≥ col` in system numbering (`u` of unknown `i` is row `i`, `v` row `n + i`).
     slots: Vec<[[usize; 6]; 6]>,
     symbolic: SymbolicLlt<usize>,
+    /// Per unknown, the unknown it moves with (`Patch::coincident_boundary`): faces are assembled
+    /// on the glued unknowns, and an unknown glued to another keeps only the proximal term and
+    /// takes the other's solution.
+    glue: Vec<u32>,
     /// Diagonal proximal weight, `1e-4 ×` the mean face weight: keeps the system positive
     /// definite (translations are otherwise free) and each step small where nothing pulls.
     proximal: f64,
 }
 
 impl SlimSystem {
-    fn new(patch: &Patch) -> Option<SlimSystem> {
+    fn new(patch: &Patch, glue: Vec<u32>) -> Option<SlimSystem> {
         let n = patch.n;
-        let index = |corner: &[u32; 3], a: usize| -> usize { (a / 3) * n + corner[a % 3] as usize };
+        let index =
+            |corner: &[u32; 3], a: usize| -> usize { (a / 3) * n + glue[corner[a % 3] as usize] as usize };
         let mut triplets = Vec::new();
         for i in 0..2 * n {
             triplets.push(Triplet::new(i, i, 0.0));
@@ -1909,7 +1955,7 @@ impl SlimSystem {
         let symbolic = SymbolicLlt::try_new(matrix.symbolic(), Side::Lower).ok()?;
         let live = patch.live().count().max(1);
         let proximal = 1e-4 * patch.live().map(|(t, _)| patch.rest[t].weight).sum::<f64>() / live as f64;
-        Some(SlimSystem { matrix, slots, symbolic, proximal })
+        Some(SlimSystem { matrix, slots, symbolic, glue, proximal })
     }
 
     /// The global step at `p`: the positions minimising `Σ_t A_t ‖W_t (J_t − R_t)‖² +
@@ -1924,12 +1970,13 @@ impl SlimSystem {
                 let rest = &patch.rest[t];
                 let (a_rows, targets) = slim_terms(rest, c.map(|i| p[i as usize]))?;
                 let slots = &self.slots[live_index];
+                let g = c.map(|v| self.glue[v as usize] as usize);
                 for (a, target) in a_rows.iter().zip(targets) {
                     for x in 0..6 {
-                        let gx = (x / 3) * n + c[x % 3] as usize;
+                        let gx = (x / 3) * n + g[x % 3];
                         rhs[(gx, 0)] += rest.weight * a[x] * target;
                         for y in 0..=x {
-                            let gy = (y / 3) * n + c[y % 3] as usize;
+                            let gy = (y / 3) * n + g[y % 3];
                             // Each unordered pair once: the lower triangle holds it.
                             let slot = if gx >= gy { slots[x][y] } else { slots[y][x] };
                             vals[slot] += rest.weight * a[x] * a[y];
@@ -1953,8 +2000,7 @@ impl SlimSystem {
         let llt =
             Llt::try_new_with_symbolic(self.symbolic.clone(), self.matrix.as_ref(), Side::Lower).ok()?;
         llt.solve_in_place(rhs.as_mut());
-        let q: Vec<[f64; 2]> = (0..n).map(|i| [rhs[(i, 0)], rhs[(n + i, 0)]]).collect();
-        q.iter().flatten().all(|x| x.is_finite()).then_some(q)
+        self.unglued(&rhs)
     }
     /// [`SlimSystem::global`] with the scaffold's triangles in the energy: the pattern changes
     /// with the scaffold, so the system is assembled and factored anew.
@@ -1963,7 +2009,7 @@ impl SlimSystem {
         let mut rhs = Mat::<f64>::zeros(2 * n, 1);
         let mut triplets: Vec<Triplet<usize, usize, f64>> =
             (0..2 * n).map(|i| Triplet::new(i, i, self.proximal)).collect();
-        let island = patch.live().map(|(t, c)| (c, &patch.rest[t]));
+        let island = patch.live().map(|(t, c)| (c.map(|v| self.glue[v as usize]), &patch.rest[t]));
         let scaffold = sc.tris.iter().copied().zip(&sc.rest);
         for (verts, rest) in island.chain(scaffold) {
             let (rows, targets) = slim_terms(rest, verts.map(|v| sc.pos(p, v)))?;
@@ -1997,8 +2043,16 @@ impl SlimSystem {
         let matrix = assemble(2 * n, &triplets);
         let llt = matrix.sp_cholesky(Side::Lower).ok()?;
         llt.solve_in_place(rhs.as_mut());
-        let q: Vec<[f64; 2]> = (0..n).map(|i| [rhs[(i, 0)], rhs[(n + i, 0)]]).collect();
-        q.iter().flatten().all(|x| x.is_finite()).then_some(q)
+        self.unglued(&rhs)
+    }
+
+    /// The positions of a solved system (`u` then `v` in one column), every unknown at the
+    /// position of the one it is glued to; `None` when not finite.
+    fn unglued(&self, x: &Mat<f64>) -> Option<Vec<[f64; 2]>> {
+        let n = self.glue.len();
+        let q: Vec<[f64; 2]> =
+            self.glue.iter().map(|&g| [x[(g as usize, 0)], x[(n + g as usize, 0)]]).collect();
+        q.iter().flatten().all(|v| v.is_finite()).then_some(q)
     }
 }
 
@@ -2124,6 +2178,36 @@ mod tests {
         assert!(r.energy_after < 4.0 + 1e-3, "{r:?}");
         let p = crate::partuv::partuv_metrics(&out.mesh).unwrap();
         assert!(p.angular_score > 0.999 && p.area_distortion < 1.01, "{p:?}");
+    }
+
+    #[test]
+    fn an_island_touching_itself_at_a_boundary_point_still_refines() {
+        // A 6 × 6 grid without its corner and centre 2 × 2 blocks: a "C" whose two tips meet at
+        // one mesh vertex (two fans, so two unknowns at one point, as marching cubes makes them).
+        // Its UVs are a smooth injective stretch of the plane, far from isometric.
+        let m = grid(6, |p| {
+            let (u, v) = ((p[0] + 1.0) * 0.5, (p[1] + 1.0) * 0.5);
+            [u + 0.6 * u * u, v * (1.0 + 0.8 * u)]
+        });
+        let uv = m.uv.as_ref().unwrap();
+        let keep: Vec<usize> = (0..m.triangles.len())
+            .filter(|&t| {
+                let (i, j) = ((t / 2) % 6 / 2, (t / 2) / 6 / 2);
+                !((i, j) == (0, 0) || (i, j) == (1, 1))
+            })
+            .collect();
+        let triangles: Vec<[u32; 3]> = keep.iter().map(|&t| m.triangles[t]).collect();
+        let uv =
+            UvLayer { coords: uv.coords.clone(), triangles: keep.iter().map(|&t| uv.triangles[t]).collect() };
+        let m = TriMesh { positions: m.positions.clone(), triangles, uv: Some(uv) };
+        let out = make_injective(&m, &InjectiveOptions { tolerance: 1e-6, ..Default::default() }).unwrap();
+        let r = &out.report;
+        assert_eq!((r.islands_before, r.not_injective_before, r.not_injective_after), (1, 0, 0), "{r:?}");
+        assert_eq!((r.reembedded, r.split), (0, 0), "{r:?}");
+        assert!(r.energy_before > 4.2, "the start is far from isometric: {r:?}");
+        // Stalled at the start (4.4) before the two unknowns at the tips moved together.
+        assert!(r.energy_after < 4.01, "{r:?}");
+        assert_eq!(flips_and_overlaps(&out.mesh), (0, 0));
     }
 
     #[test]
