@@ -28,6 +28,11 @@
 //! a sloppy surface network elsewhere does not cut the charts up. On the bunny this removes most
 //! overlapping faces and changes no score (BENCHMARKS.md, "Round-trip check").
 //!
+//! **Enclaves** (not in the paper; optional, [`BakeOptions::absorb_enclaves`]). After the round
+//! trip, a small patch of one chart surrounded by one other chart moves to that chart where its
+//! map has the patch the right way round ([`crate::enclaves`]): chart-label noise of
+//! marching-cubes meshes otherwise leaves specks, each an island with a seam all round it.
+//!
 //! **Untangling** (not in the paper; optional, [`BakeOptions::untangle`]). After the charts are
 //! chosen, faces the wrong way round in their chart (fold-overs, mostly tiny triangles on creases of
 //! a scanned surface) are turned back by moving single UV vertices inside their chart
@@ -39,6 +44,7 @@ use std::collections::HashMap;
 use nuvo_geometry::{TriMesh, UvLayer};
 use serde::Serialize;
 
+use crate::enclaves::absorb_enclaves;
 use crate::error::AtlasError;
 use crate::pack::AtlasLayout;
 use crate::untangle::{UntangleReport, untangle};
@@ -71,6 +77,9 @@ pub struct RoundTrip<'a> {
 pub struct BakeOptions {
     /// Move UV vertices so faces flipped in their chart turn back (module docs, [`crate::untangle`]).
     pub untangle: bool,
+    /// Move small specks of one chart inside another to the surrounding chart where it maps them
+    /// the right way round (module docs, [`crate::enclaves`]).
+    pub absorb_enclaves: bool,
 }
 
 /// A baked mesh and what the bake found.
@@ -107,6 +116,8 @@ pub struct BakeReport {
     pub mixed_faces: usize,
     /// Faces the round-trip check moved off their most probable chart (0 without the check).
     pub reassigned_faces: usize,
+    /// Faces of enclaves moved to the chart round them (0 without [`BakeOptions::absorb_enclaves`]).
+    pub absorbed_faces: usize,
     /// What untangling did (all zero when it is off).
     pub untangle: UntangleReport,
 }
@@ -139,6 +150,15 @@ pub fn bake(
             analysis = analyse_uv(&layer.mesh, Some(&face_chart), layout.resolution)?;
         }
     }
+    let mut absorbed_faces = 0;
+    if options.absorb_enclaves {
+        absorbed_faces =
+            absorb_enclaves(mesh, |v, c| chart_uv(fields.uvs, n, v, c as usize), &mut face_chart);
+        if absorbed_faces > 0 {
+            layer = assemble(mesh, fields.uvs, n, layout, &face_chart);
+            analysis = analyse_uv(&layer.mesh, Some(&face_chart), layout.resolution)?;
+        }
+    }
     let mut untangled = UntangleReport::default();
     if options.untangle && !analysis.flipped.is_empty() {
         let tiles: Vec<[[f32; 2]; 2]> = (0..n).map(|c| layout.chart_bounds(c)).collect();
@@ -163,6 +183,7 @@ pub fn bake(
         corners_outside_chart: layer.corners_outside_chart,
         mixed_faces,
         reassigned_faces,
+        absorbed_faces,
         untangle: untangled,
     };
     Ok(Baked { mesh: layer.mesh, face_chart, vertex_chart, report })
@@ -415,7 +436,7 @@ mod tests {
         let (m, probs, uvs, _) = folded_with_round_trip();
         let fields = plain(&probs, &uvs);
         let plain = bake_two(&m, &fields, BakeOptions::default());
-        let b = bake_two(&m, &fields, BakeOptions { untangle: true });
+        let b = bake_two(&m, &fields, BakeOptions { untangle: true, ..Default::default() });
         assert_eq!(plain.report.untangle, UntangleReport::default(), "off by default");
         // The strip's fold line is chart 0's edge u = 0, so the strip cannot unfold by going past
         // it: it has to turn back inside chart 0's square, which single moves nearly always do.

@@ -27,6 +27,7 @@
 
 pub mod bake;
 pub mod camera;
+pub mod enclaves;
 pub mod error;
 pub mod export;
 mod font;

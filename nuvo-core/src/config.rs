@@ -253,6 +253,12 @@ pub struct OutputConfig {
     /// scanned surface, where a smooth map of 3-D position cannot help mirroring them) turn back.
     /// The flipped-face count never rises. Off by default, as the paper bakes the map as it is.
     pub untangle: bool,
+    /// Absorb chart enclaves in the bake (not in the paper; `nuvo_atlas::enclaves`): a patch of
+    /// one chart surrounded by one other, and smaller than the region round it, moves to that chart
+    /// where the chart's map has it the right way round. The chart network's argmax is noisy on
+    /// marching-cubes meshes, and every speck it leaves is an island with a seam all round it.
+    /// Off by default, as the paper bakes by the probabilities alone; on in `nuvo unwrap`.
+    pub absorb_enclaves: bool,
     /// Refine the baked islands towards isometry (not in the paper; `nuvo_atlas::refine`): a
     /// local/global ARAP solve per UV island, started from the networks' UVs, kept only where it
     /// adds no flipped face and does not lower the island's angular score. Off by default (the
@@ -302,6 +308,7 @@ impl Default for OutputConfig {
             gutter: 4,
             round_trip_tolerance: 0.0,
             untangle: false,
+            absorb_enclaves: false,
             refine: false,
             injective: false,
             injective_split_energy: nuvo_atlas::injective::SPLIT_ENERGY,
@@ -846,6 +853,17 @@ mod tests {
         let c = from_str_with_overrides("c.toml", MINIMAL, &sets).unwrap();
         assert_eq!(c.config.output.round_trip_tolerance, 0.1);
         assert!(c.source.is_overridden("output.round_trip_tolerance"));
+    }
+
+    #[test]
+    fn absorb_enclaves_is_off_by_default_and_a_boolean() {
+        assert!(!from_str("c.toml", MINIMAL).unwrap().config.output.absorb_enclaves);
+        let on = from_str("c.toml", &format!("{MINIMAL}[output]\nabsorb_enclaves = true\n")).unwrap();
+        assert!(on.config.output.absorb_enclaves);
+        let e = from_str("c.toml", &format!("{MINIMAL}[output]\nabsorb_enclaves = \"yes\"\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("absorb_enclaves"), "{e}");
     }
 
     #[test]

@@ -86,6 +86,8 @@ pub struct BakeSummary {
     pub mixed_faces: usize,
     /// Faces the round-trip check moved to another chart (`output.round_trip_tolerance`).
     pub reassigned_faces: usize,
+    /// Faces of chart enclaves moved to the chart round them (`output.absorb_enclaves`).
+    pub absorbed_faces: usize,
     /// Flipped faces before untangling (`output.untangle`; equal to `flipped_faces` without it).
     pub flipped_before_untangle: usize,
     /// UV vertex moves untangling made.
@@ -219,7 +221,7 @@ fn bake_and_measure(
     let layout = AtlasLayout::grid(n, opts.atlas_resolution, opts.gutter)?;
     let round_trip = (opts.round_trip_tolerance > 0.0)
         .then(|| RoundTrip { distances: &fields.round_trip, tolerance: opts.round_trip_tolerance });
-    let options = BakeOptions { untangle: opts.untangle };
+    let options = BakeOptions { untangle: opts.untangle, absorb_enclaves: opts.absorb_enclaves };
     let baked = bake(
         mesh,
         &ChartFields { probs: &fields.probs, uvs: &fields.uvs, round_trip },
@@ -321,6 +323,7 @@ fn summarize(r: &BakeReport, recount: Option<&UvAnalysis>, face_chart: &[u32], n
         corners_outside_chart: r.corners_outside_chart,
         mixed_faces: r.mixed_faces,
         reassigned_faces: r.reassigned_faces,
+        absorbed_faces: r.absorbed_faces,
         flipped_before_untangle: if r.untangle.moves > 0 {
             r.untangle.flipped_before
         } else {

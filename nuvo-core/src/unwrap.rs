@@ -242,6 +242,9 @@ pub fn recipe(r: &RecipeInput) -> String {
     // renders see, while its distortion barely moves the medians (BENCHMARKS.md, "Injective
     // islands on fragmented meshes").
     bake += "injective = true\njoin = true\n";
+    // Specks of one chart inside another become part of it where its map allows: the chart
+    // network's argmax is noisy on fragmented inputs, and clean ones lose nothing.
+    bake += "absorb_enclaves = true\n";
     if !clean {
         bake += "injective_split_energy = inf\n";
     }
@@ -526,7 +529,7 @@ mod tests {
         let clean = crate::config::from_str("clean", &recipe(&base)).unwrap().config;
         assert_eq!((clean.model.charts, clean.training.steps, clean.seed), (5, 900, 3));
         assert!(clean.output.untangle && clean.output.round_trip_tolerance > 0.0 && clean.output.injective);
-        assert!(clean.output.join);
+        assert!(clean.output.join && clean.output.absorb_enclaves);
         assert_eq!(clean.output.injective_split_energy, nuvo_atlas::injective::SPLIT_ENERGY);
         assert_eq!(clean.training.time_budget_minutes, Some(1.5));
         assert_eq!(clean.warm_start.unwrap().steps, 270);
@@ -538,6 +541,7 @@ mod tests {
         let c = crate::config::from_str("unruly", &recipe(&unruly)).unwrap().config;
         assert!(!c.output.untangle && c.output.round_trip_tolerance == 0.0);
         assert!(c.output.injective && c.output.join, "injective islands everywhere");
+        assert!(c.output.absorb_enclaves);
         assert_eq!(c.output.injective_split_energy, f64::INFINITY, "no splits of fragments' discs");
         assert!(c.output.refine, "refinement holds everywhere");
         assert_eq!(c.geometry.options["sampling"].as_str(), Some("visible"));

@@ -1,0 +1,244 @@
+//! Absorbing chart enclaves in the bake: a small patch of faces that the chart network gave to
+//! one chart, surrounded by faces of one other chart, moves to the surrounding chart when that
+//! chart maps it the right way round.
+//!
+//! Why: on marching-cubes meshes of neural fields the chart network's argmax is noisy face by face,
+//! and a chart region is riddled with specks of another chart, often a single face. Each speck is
+//! an island of its own after the bake, with a seam all round it that every render crossing it
+//! sees: on a marching-cubes homer such holes drew rings of boundary pixels over the whole body.
+//! The surrounding chart's texture network is defined there too and usually continuous across
+//! the speck, so taking it over removes the seam without a new fold. The join step after the
+//! layout ([`crate::join`]) cannot do this: it needs the speck's island to fit into the hole that
+//! refinement left, with a bounded distortion, and mostly refuses.
+//!
+//! Definitions (exact):
+//! - **Regions**: faces joined across a mesh edge used by exactly two faces, both of one chart
+//!   (the connected components of the chart labels). Edges of one face or of three or more do not
+//!   join.
+//! - **Neighbours** of a region: the faces across its joining edges that are of another chart.
+//! - **Enclave**: a region with neighbours, all of one chart `j`, whose 3-D area is below that of
+//!   the largest region of `j` it borders (so the smaller side moves, and whole components such as
+//!   floaters, which have no neighbours, never do).
+//! - **Check**: every face of the enclave that has a 3-D area must have, under chart `j`'s texture
+//!   map, a positive UV area with `j`'s majority orientation (the sign of the summed signed UV area
+//!   of `j`'s faces as baked), so absorbing adds no flipped face; faces degenerate in 3-D
+//!   ([`crate::uvstats`]) are not checked, as no render sees them and refinement reshapes them.
+//! - **Order**: regions are visited once each in order of increasing area (ties: lowest face),
+//!   against the labels as they are by then, so a speck inside a speck moves before its host is
+//!   judged; an absorbed region counts towards the area of the region it joined.
+//!
+//! Deterministic: no hashing order is observed.
+
+use std::collections::HashMap;
+
+use nuvo_geometry::TriMesh;
+
+use crate::uvstats::{Dsu, degenerate_3d_faces};
+use crate::vecmath::{cross, norm, signed_area2_2d, sub, v3};
+
+/// Moves every enclave (module docs) of `face_chart` to its surrounding chart where the check
+/// passes; `chart_uv(v, c)` is chart `c`'s UV at vertex `v`. Returns the faces moved.
+pub fn absorb_enclaves(
+    mesh: &TriMesh,
+    chart_uv: impl Fn(u32, u32) -> [f32; 2],
+    face_chart: &mut [u32],
+) -> usize {
+    let faces = mesh.triangles.len();
+    let degenerate = degenerate_3d_faces(mesh);
+    let area: Vec<f64> = (0..faces)
+        .map(|f| {
+            let [a, b, c] = mesh.corners(f).map(v3);
+            0.5 * norm(cross(sub(b, a), sub(c, a)))
+        })
+        .collect();
+    let signed = |f: usize, c: u32| {
+        let t = mesh.triangles[f];
+        signed_area2_2d(chart_uv(t[0], c), chart_uv(t[1], c), chart_uv(t[2], c))
+    };
+    let charts = face_chart.iter().map(|&c| c as usize + 1).max().unwrap_or(0);
+    let mut majority = vec![0.0f64; charts];
+    for (f, &c) in face_chart.iter().enumerate() {
+        majority[c as usize] += signed(f, c);
+    }
+    // Faces across each joining edge (exactly two faces use it).
+    let mut uses: HashMap<(u32, u32), Vec<u32>> = HashMap::with_capacity(3 * faces / 2);
+    for (f, t) in mesh.triangles.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            uses.entry((a.min(b), a.max(b))).or_default().push(f as u32);
+        }
+    }
+    let mut across: Vec<Vec<u32>> = vec![Vec::new(); faces];
+    for (f, t) in mesh.triangles.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            let pair = &uses[&(a.min(b), a.max(b))];
+            if pair.len() == 2 {
+                let o = if pair[0] == f as u32 { pair[1] } else { pair[0] };
+                if o != f as u32 {
+                    across[f].push(o);
+                }
+            }
+        }
+    }
+    let mut dsu = Dsu::new(faces);
+    for f in 0..faces {
+        for &o in &across[f] {
+            if face_chart[o as usize] == face_chart[f] {
+                dsu.union(f as u32, o);
+            }
+        }
+    }
+    let mut members: Vec<Vec<u32>> = vec![Vec::new(); faces];
+    let mut region_area = vec![0.0f64; faces];
+    for (f, a) in area.iter().enumerate() {
+        let r = dsu.find(f as u32) as usize;
+        members[r].push(f as u32);
+        region_area[r] += a;
+    }
+    // Roots are each region's lowest face, so this order is the documented one.
+    let mut order: Vec<usize> = (0..faces).filter(|&r| !members[r].is_empty()).collect();
+    order.sort_by(|&a, &b| region_area[a].total_cmp(&region_area[b]).then(a.cmp(&b)));
+    let mut moved = 0;
+    for r in order {
+        let own = face_chart[r];
+        let mut host: Option<u32> = None;
+        let mut single = true;
+        let mut largest = (0.0f64, u32::MAX);
+        for &f in &members[r] {
+            for &o in &across[f as usize] {
+                let c = face_chart[o as usize];
+                if c == own {
+                    continue;
+                }
+                single &= host.is_none_or(|h| h == c);
+                host = Some(c);
+                let root = dsu.find(o);
+                let a = region_area[root as usize];
+                if a > largest.0 || (a == largest.0 && root < largest.1) {
+                    largest = (a, root);
+                }
+            }
+        }
+        let Some(j) = host else { continue };
+        if !single || region_area[r] >= largest.0 {
+            continue;
+        }
+        let sign = majority[j as usize];
+        let fits = members[r].iter().all(|&f| {
+            let f = f as usize;
+            degenerate[f] || {
+                let s = signed(f, j);
+                s * sign > 0.0
+            }
+        });
+        if !fits {
+            continue;
+        }
+        for &f in &members[r] {
+            face_chart[f as usize] = j;
+        }
+        moved += members[r].len();
+        // Join the host regions it touches; the merged region keeps the total area.
+        let mut hosts: Vec<u32> = members[r]
+            .iter()
+            .flat_map(|&f| across[f as usize].iter().copied())
+            .filter(|&o| face_chart[o as usize] == j)
+            .map(|o| dsu.find(o))
+            .collect();
+        hosts.sort_unstable();
+        hosts.dedup();
+        let mut total = region_area[r];
+        let mut all = std::mem::take(&mut members[r]);
+        for &h in &hosts {
+            total += region_area[h as usize];
+            all.append(&mut members[h as usize]);
+            dsu.union(h, r as u32);
+        }
+        let root = dsu.find(r as u32) as usize;
+        members[root] = all;
+        region_area[root] = total;
+    }
+    moved
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testmesh::grid;
+
+    /// An 8 × 8-quad plane (128 faces) whose every vertex has UV `(x, y)` in chart 0 and
+    /// `(x, -y)` in chart 1 (mirrored); `face_chart` puts every face on chart 0 but those listed.
+    fn plane(on_one: &[usize]) -> (TriMesh, Vec<u32>) {
+        let m = grid(8, |p| [p[0], p[1]]);
+        let mut chart = vec![0u32; m.triangles.len()];
+        for &f in on_one {
+            chart[f] = 1;
+        }
+        (m, chart)
+    }
+
+    fn uv_of(m: &TriMesh) -> impl Fn(u32, u32) -> [f32; 2] + '_ {
+        |v, c| {
+            let p = m.positions[v as usize];
+            if c == 0 { [p[0], p[1]] } else { [p[0], -p[1]] }
+        }
+    }
+
+    #[test]
+    fn a_speck_inside_a_chart_joins_it() {
+        // Faces 2 × (3·8 + 3) and its pair: one quad in the middle.
+        let (m, mut chart) = plane(&[54, 55]);
+        assert_eq!(absorb_enclaves(&m, uv_of(&m), &mut chart), 2);
+        assert!(chart.iter().all(|&c| c == 0));
+    }
+
+    #[test]
+    fn the_larger_side_stays() {
+        // Chart 1 holds the upper half: its only neighbour chart is 0, but it is not smaller.
+        let half: Vec<usize> = (64..128).collect();
+        let (m, mut chart) = plane(&half);
+        let before = chart.clone();
+        assert_eq!(absorb_enclaves(&m, uv_of(&m), &mut chart), 0);
+        assert_eq!(chart, before);
+    }
+
+    #[test]
+    fn a_speck_its_host_would_flip_stays() {
+        // The host chart 0 mirrors the speck's quad (x in [-0.25, 0], y in [-0.25, 0]) in u.
+        let (m, mut chart) = plane(&[54, 55]);
+        let folded = |v: u32, c: u32| {
+            let p = m.positions[v as usize];
+            let corner = (-0.3..0.05).contains(&p[0]) && (-0.3..0.05).contains(&p[1]);
+            match (c, corner) {
+                (0, true) => [-0.25 - p[0], p[1]],
+                (0, false) => [p[0], p[1]],
+                _ => [p[0], -p[1]],
+            }
+        };
+        assert_eq!(absorb_enclaves(&m, folded, &mut chart), 0);
+        assert_eq!(chart.iter().filter(|&&c| c == 1).count(), 2);
+    }
+
+    #[test]
+    fn a_region_between_two_other_charts_stays() {
+        // Chart 1 is a full-height band (columns 3–4) between chart 0 on the left and chart 2 on
+        // the right: its neighbours are of two charts.
+        let (m, mut chart) = plane(&[]);
+        for (f, c) in chart.iter_mut().enumerate() {
+            let column = (f / 2) % 8;
+            *c = match column {
+                0..=2 => 0,
+                3..=4 => 1,
+                _ => 2,
+            };
+        }
+        let before = chart.clone();
+        let uv = |v: u32, _c: u32| {
+            let p = m.positions[v as usize];
+            [p[0], p[1]]
+        };
+        assert_eq!(absorb_enclaves(&m, uv, &mut chart), 0);
+        assert_eq!(chart, before);
+    }
+}
