@@ -158,14 +158,16 @@ fn print_report(report: &OutputReport, seconds: f64) {
         };
         println!(
             "       UV charts {}, utilisation {:.3}, flipped {} faces ({} on creases of the mesh{untangled}), \
-             overlapping {} faces, faces per chart {:?} ({} moved by the round-trip check)",
+             overlapping {} faces, faces per chart {:?} ({} moved by the round-trip check, {} from chart \
+             specks to the chart round them)",
             u.charts,
             u.utilisation,
             b.flipped_faces,
             b.flipped_on_creases,
             b.overlapping_faces,
             b.faces_per_chart,
-            b.reassigned_faces
+            b.reassigned_faces,
+            b.absorbed_faces
         );
     }
     for f in &report.files {
