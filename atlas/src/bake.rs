@@ -150,10 +150,23 @@ pub fn bake(
             analysis = analyse_uv(&layer.mesh, Some(&face_chart), layout.resolution)?;
         }
     }
+    // With the round-trip check on, an enclave moves only to a chart that passes it at every
+    // corner, or absorbing would bring back the overlaps the check removed.
+    let round_trip_allows = |f: u32, c: u32| {
+        fields.round_trip.as_ref().is_none_or(|rt| {
+            mesh.triangles[f as usize]
+                .iter()
+                .all(|&v| rt.distances[v as usize * n + c as usize] <= rt.tolerance)
+        })
+    };
     let mut absorbed_faces = 0;
     if options.absorb_enclaves {
-        absorbed_faces =
-            absorb_enclaves(mesh, |v, c| chart_uv(fields.uvs, n, v, c as usize), &mut face_chart);
+        absorbed_faces = absorb_enclaves(
+            mesh,
+            |v, c| chart_uv(fields.uvs, n, v, c as usize),
+            round_trip_allows,
+            &mut face_chart,
+        );
         if absorbed_faces > 0 {
             layer = assemble(mesh, fields.uvs, n, layout, &face_chart);
             analysis = analyse_uv(&layer.mesh, Some(&face_chart), layout.resolution)?;

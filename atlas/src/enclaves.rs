@@ -23,9 +23,11 @@
 //!   map, a positive UV area with `j`'s majority orientation (the sign of the summed signed UV area
 //!   of `j`'s faces as baked), so absorbing adds no flipped face; faces degenerate in 3-D
 //!   ([`crate::uvstats`]) are not checked, as no render sees them and refinement reshapes them.
-//! - **Order**: regions are visited once each in order of increasing area (ties: lowest face),
-//!   against the labels as they are by then, so a speck inside a speck moves before its host is
-//!   judged; an absorbed region counts towards the area of the region it joined.
+//!   And the caller's `allowed(face, j)` must hold for every face (the bake's round-trip check).
+//! - **Order**: the regions of the start are judged once each in order of their starting area
+//!   (ties: lowest face), against the labels and regions as they are by then. An enclave and the
+//!   host regions it touches become one region, judged when the largest host's turn comes, so a
+//!   speck inside a speck moves before its host is judged; a region already absorbed is skipped.
 //!
 //! Deterministic: no hashing order is observed.
 
@@ -37,10 +39,13 @@ use crate::uvstats::{Dsu, degenerate_3d_faces};
 use crate::vecmath::{cross, norm, signed_area2_2d, sub, v3};
 
 /// Moves every enclave (module docs) of `face_chart` to its surrounding chart where the check
-/// passes; `chart_uv(v, c)` is chart `c`'s UV at vertex `v`. Returns the faces moved.
+/// passes; `chart_uv(v, c)` is chart `c`'s UV at vertex `v`, and `allowed(f, c)` must hold for
+/// every face `f` of an enclave for it to take chart `c` (the bake's round-trip check, so that an
+/// absorbed speck does not bring back an overlap that check removed). Returns the faces moved.
 pub fn absorb_enclaves(
     mesh: &TriMesh,
     chart_uv: impl Fn(u32, u32) -> [f32; 2],
+    allowed: impl Fn(u32, u32) -> bool,
     face_chart: &mut [u32],
 ) -> usize {
     let faces = mesh.triangles.len();
@@ -89,23 +94,37 @@ pub fn absorb_enclaves(
             }
         }
     }
+    // Each face's region at the start (its lowest face), and where each region has been merged
+    // into since: a region that absorbs a speck stays under the key of the largest region it
+    // joined, which has yet to be judged, whatever the face numbering.
+    let start: Vec<u32> = (0..faces as u32).map(|f| dsu.find(f)).collect();
+    let mut owner: Vec<u32> = (0..faces as u32).collect();
+    let current = |owner: &mut Vec<u32>, mut x: u32| -> u32 {
+        while owner[x as usize] != x {
+            let up = owner[owner[x as usize] as usize];
+            owner[x as usize] = up;
+            x = up;
+        }
+        x
+    };
     let mut members: Vec<Vec<u32>> = vec![Vec::new(); faces];
     let mut region_area = vec![0.0f64; faces];
     for (f, a) in area.iter().enumerate() {
-        let r = dsu.find(f as u32) as usize;
-        members[r].push(f as u32);
-        region_area[r] += a;
+        members[start[f] as usize].push(f as u32);
+        region_area[start[f] as usize] += a;
     }
-    // Roots are each region's lowest face, so this order is the documented one.
-    let mut order: Vec<usize> = (0..faces).filter(|&r| !members[r].is_empty()).collect();
-    order.sort_by(|&a, &b| region_area[a].total_cmp(&region_area[b]).then(a.cmp(&b)));
+    let mut order: Vec<u32> = (0..faces as u32).filter(|&r| !members[r as usize].is_empty()).collect();
+    order.sort_by(|&a, &b| region_area[a as usize].total_cmp(&region_area[b as usize]).then(a.cmp(&b)));
     let mut moved = 0;
     for r in order {
-        let own = face_chart[r];
+        if current(&mut owner, r) != r {
+            continue; // absorbed into another region, judged under that one's key
+        }
+        let own = face_chart[members[r as usize][0] as usize];
         let mut host: Option<u32> = None;
         let mut single = true;
-        let mut largest = (0.0f64, u32::MAX);
-        for &f in &members[r] {
+        let mut hosts: Vec<u32> = Vec::new();
+        for &f in &members[r as usize] {
             for &o in &across[f as usize] {
                 let c = face_chart[o as usize];
                 if c == own {
@@ -113,51 +132,40 @@ pub fn absorb_enclaves(
                 }
                 single &= host.is_none_or(|h| h == c);
                 host = Some(c);
-                let root = dsu.find(o);
-                let a = region_area[root as usize];
-                if a > largest.0 || (a == largest.0 && root < largest.1) {
-                    largest = (a, root);
-                }
+                hosts.push(current(&mut owner, start[o as usize]));
             }
         }
         let Some(j) = host else { continue };
-        if !single || region_area[r] >= largest.0 {
+        hosts.sort_unstable();
+        hosts.dedup();
+        // The largest host region (ties: the lowest key).
+        let Some(&key) = hosts
+            .iter()
+            .max_by(|&&a, &&b| region_area[a as usize].total_cmp(&region_area[b as usize]).then(b.cmp(&a)))
+        else {
+            continue;
+        };
+        if !single || region_area[r as usize] >= region_area[key as usize] {
             continue;
         }
         let sign = majority[j as usize];
-        let fits = members[r].iter().all(|&f| {
-            let f = f as usize;
-            degenerate[f] || {
-                let s = signed(f, j);
-                s * sign > 0.0
-            }
-        });
+        let fits = members[r as usize]
+            .iter()
+            .all(|&f| allowed(f, j) && (degenerate[f as usize] || signed(f as usize, j) * sign > 0.0));
         if !fits {
             continue;
         }
-        for &f in &members[r] {
+        for &f in &members[r as usize] {
             face_chart[f as usize] = j;
         }
-        moved += members[r].len();
-        // Join the host regions it touches; the merged region keeps the total area.
-        let mut hosts: Vec<u32> = members[r]
-            .iter()
-            .flat_map(|&f| across[f as usize].iter().copied())
-            .filter(|&o| face_chart[o as usize] == j)
-            .map(|o| dsu.find(o))
-            .collect();
-        hosts.sort_unstable();
-        hosts.dedup();
-        let mut total = region_area[r];
-        let mut all = std::mem::take(&mut members[r]);
-        for &h in &hosts {
-            total += region_area[h as usize];
-            all.append(&mut members[h as usize]);
-            dsu.union(h, r as u32);
+        moved += members[r as usize].len();
+        // One region now: the enclave and every host region it touches, under `key`.
+        for h in hosts.into_iter().filter(|&h| h != key).chain([r]) {
+            let mut taken = std::mem::take(&mut members[h as usize]);
+            members[key as usize].append(&mut taken);
+            region_area[key as usize] += region_area[h as usize];
+            owner[h as usize] = key;
         }
-        let root = dsu.find(r as u32) as usize;
-        members[root] = all;
-        region_area[root] = total;
     }
     moved
 }
@@ -189,8 +197,52 @@ mod tests {
     fn a_speck_inside_a_chart_joins_it() {
         // Faces 2 × (3·8 + 3) and its pair: one quad in the middle.
         let (m, mut chart) = plane(&[54, 55]);
-        assert_eq!(absorb_enclaves(&m, uv_of(&m), &mut chart), 2);
+        assert_eq!(absorb_enclaves(&m, uv_of(&m), |_, _| true, &mut chart), 2);
         assert!(chart.iter().all(|&c| c == 0));
+    }
+
+    #[test]
+    fn a_speck_inside_a_speck_moves_first_then_its_host_whatever_the_face_order() {
+        // Chart 2 is one quad (faces 54, 55) inside a 4 × 4-quad block of chart 1 (columns and
+        // rows 2–5), inside chart 0. Then the same mesh with the inner speck's faces numbered
+        // first, so that it, not its host, holds the lowest face.
+        for speck_first in [false, true] {
+            let (mut m, _) = plane(&[]);
+            let mut order: Vec<usize> = (0..m.triangles.len()).collect();
+            if speck_first {
+                order.retain(|&f| f != 54 && f != 55);
+                order.splice(0..0, [54, 55]);
+            }
+            m.triangles = order.iter().map(|&f| m.triangles[f]).collect();
+            let mut chart: Vec<u32> = order
+                .iter()
+                .map(|&f| {
+                    let (i, j) = ((f / 2) % 8, (f / 2) / 8);
+                    if f == 54 || f == 55 {
+                        2
+                    } else if (2..6).contains(&i) && (2..6).contains(&j) {
+                        1
+                    } else {
+                        0
+                    }
+                })
+                .collect();
+            // Every chart maps the plane as it is: nothing flips anywhere.
+            let uv = |v: u32, _c: u32| {
+                let p = m.positions[v as usize];
+                [p[0], p[1]]
+            };
+            // The speck's 2 faces join the block, then the block's 32 join chart 0.
+            assert_eq!(absorb_enclaves(&m, uv, |_, _| true, &mut chart), 34, "speck first: {speck_first}");
+            assert!(chart.iter().all(|&c| c == 0), "speck first: {speck_first}");
+        }
+    }
+
+    #[test]
+    fn a_speck_the_caller_does_not_allow_stays() {
+        let (m, mut chart) = plane(&[54, 55]);
+        assert_eq!(absorb_enclaves(&m, uv_of(&m), |f, _| f != 55, &mut chart), 0);
+        assert_eq!(chart.iter().filter(|&&c| c == 1).count(), 2);
     }
 
     #[test]
@@ -199,7 +251,7 @@ mod tests {
         let half: Vec<usize> = (64..128).collect();
         let (m, mut chart) = plane(&half);
         let before = chart.clone();
-        assert_eq!(absorb_enclaves(&m, uv_of(&m), &mut chart), 0);
+        assert_eq!(absorb_enclaves(&m, uv_of(&m), |_, _| true, &mut chart), 0);
         assert_eq!(chart, before);
     }
 
@@ -216,7 +268,7 @@ mod tests {
                 _ => [p[0], -p[1]],
             }
         };
-        assert_eq!(absorb_enclaves(&m, folded, &mut chart), 0);
+        assert_eq!(absorb_enclaves(&m, folded, |_, _| true, &mut chart), 0);
         assert_eq!(chart.iter().filter(|&&c| c == 1).count(), 2);
     }
 
@@ -238,7 +290,7 @@ mod tests {
             let p = m.positions[v as usize];
             [p[0], p[1]]
         };
-        assert_eq!(absorb_enclaves(&m, uv, &mut chart), 0);
+        assert_eq!(absorb_enclaves(&m, uv, |_, _| true, &mut chart), 0);
         assert_eq!(chart, before);
     }
 }
