@@ -243,7 +243,7 @@ pub fn recipe(r: &RecipeInput) -> String {
     // islands on fragmented meshes").
     bake += "injective = true\njoin = true\n";
     // Specks of one chart inside another become part of it where its map allows: the chart
-    // network's argmax is noisy on fragmented inputs (100–180 faces absorbed on each unruly
+    // network's argmax is noisy on fragmented inputs (105–184 faces absorbed on each unruly
     // mesh), and no Common Shapes mesh lost (BENCHMARKS.md, "SLIM on islands that touch
     // themselves, chart enclaves").
     bake += "absorb_enclaves = true\n";
