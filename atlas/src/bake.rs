@@ -153,11 +153,7 @@ pub fn bake(
     // With the round-trip check on, an enclave moves only to a chart that passes it at every
     // corner, or absorbing would bring back the overlaps the check removed.
     let round_trip_allows = |f: u32, c: u32| {
-        fields.round_trip.as_ref().is_none_or(|rt| {
-            mesh.triangles[f as usize]
-                .iter()
-                .all(|&v| rt.distances[v as usize * n + c as usize] <= rt.tolerance)
-        })
+        fields.round_trip.as_ref().is_none_or(|rt| rt.passes(n, &mesh.triangles[f as usize], c as usize))
     };
     let mut absorbed_faces = 0;
     if options.absorb_enclaves {
@@ -250,7 +246,7 @@ fn apply_round_trip(
     overlapping: &[u32],
     face_chart: &mut [u32],
 ) -> usize {
-    let passes = |t: &[u32; 3], i: usize| t.iter().all(|&v| rt.distances[v as usize * n + i] <= rt.tolerance);
+    let passes = |t: &[u32; 3], i: usize| rt.passes(n, t, i);
     let area = |t: &[u32; 3], i: usize| {
         let uv = |v: u32| chart_uv(fields.uvs, n, v, i);
         signed_area2_2d(uv(t[0]), uv(t[1]), uv(t[2]))
@@ -276,6 +272,13 @@ fn apply_round_trip(
         }
     }
     moved
+}
+
+impl RoundTrip<'_> {
+    /// Whether chart `i` of `n` maps every corner of face `t` back within the tolerance.
+    fn passes(&self, n: usize, t: &[u32; 3], i: usize) -> bool {
+        t.iter().all(|&v| self.distances[v as usize * n + i] <= self.tolerance)
+    }
 }
 
 fn check_inputs(

@@ -31,12 +31,11 @@
 //!
 //! Deterministic: no hashing order is observed.
 
-use std::collections::HashMap;
-
 use nuvo_geometry::TriMesh;
 
-use crate::uvstats::{Dsu, degenerate_3d_faces};
-use crate::vecmath::{cross, norm, signed_area2_2d, sub, v3};
+use crate::partuv::face_areas_3d;
+use crate::uvstats::{Dsu, degenerate_3d_faces, faces_by_edge};
+use crate::vecmath::signed_area2_2d;
 
 /// Moves every enclave (module docs) of `face_chart` to its surrounding chart where the check
 /// passes; `chart_uv(v, c)` is chart `c`'s UV at vertex `v`, and `allowed(f, c)` must hold for
@@ -50,12 +49,7 @@ pub fn absorb_enclaves(
 ) -> usize {
     let faces = mesh.triangles.len();
     let degenerate = degenerate_3d_faces(mesh);
-    let area: Vec<f64> = (0..faces)
-        .map(|f| {
-            let [a, b, c] = mesh.corners(f).map(v3);
-            0.5 * norm(cross(sub(b, a), sub(c, a)))
-        })
-        .collect();
+    let area = face_areas_3d(mesh);
     let signed = |f: usize, c: u32| {
         let t = mesh.triangles[f];
         signed_area2_2d(chart_uv(t[0], c), chart_uv(t[1], c), chart_uv(t[2], c))
@@ -66,13 +60,7 @@ pub fn absorb_enclaves(
         majority[c as usize] += signed(f, c);
     }
     // Faces across each joining edge (exactly two faces use it).
-    let mut uses: HashMap<(u32, u32), Vec<u32>> = HashMap::with_capacity(3 * faces / 2);
-    for (f, t) in mesh.triangles.iter().enumerate() {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            uses.entry((a.min(b), a.max(b))).or_default().push(f as u32);
-        }
-    }
+    let uses = faces_by_edge(mesh.triangles.iter().enumerate().map(|(f, &t)| (f as u32, t)));
     let mut across: Vec<Vec<u32>> = vec![Vec::new(); faces];
     for (f, t) in mesh.triangles.iter().enumerate() {
         for k in 0..3 {

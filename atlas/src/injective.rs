@@ -96,7 +96,7 @@ use serde::Serialize;
 
 use crate::error::AtlasError;
 use crate::refine::{Frame, area2, centroid_of, island_unknowns, write_back};
-use crate::uvstats::{degenerate_3d_faces, require_uv, uv_islands};
+use crate::uvstats::{degenerate_3d_faces, faces_by_edge, require_uv, uv_islands};
 use crate::vecmath::{norm, sub, v3};
 
 /// Weight of a 3-D-degenerate face's equilateral rest shape, relative to its area.
@@ -1166,13 +1166,9 @@ impl Patch {
         let mut bad = bad.to_vec();
         let mut q = p.to_vec();
         let mut placed = vec![false; self.n];
-        let mut by_edge: HashMap<(u32, u32), Vec<u32>> = HashMap::new();
+        let by_edge = faces_by_edge(self.live().map(|(t, c)| (t as u32, c)));
         let mut good: Vec<(usize, [[f64; 2]; 3])> = Vec::new();
         for (t, c) in self.live() {
-            for k in 0..3 {
-                let (a, b) = (c[k], c[(k + 1) % 3]);
-                by_edge.entry((a.min(b), a.max(b))).or_default().push(t as u32);
-            }
             if !bad[t] {
                 c.iter().for_each(|&v| placed[v as usize] = true);
                 good.push((t, c.map(|v| p[v as usize])));
@@ -1312,13 +1308,7 @@ impl Patch {
     /// Two parts of connected faces grown from two far-apart faces (module docs).
     fn halves(&self) -> [Vec<u32>; 2] {
         let m = self.faces.len();
-        let mut by_edge: HashMap<(u32, u32), Vec<u32>> = HashMap::new();
-        for (t, c) in self.corners.iter().enumerate() {
-            for k in 0..3 {
-                let (a, b) = (c[k], c[(k + 1) % 3]);
-                by_edge.entry((a.min(b), a.max(b))).or_default().push(t as u32);
-            }
-        }
+        let by_edge = faces_by_edge(self.corners.iter().enumerate().map(|(t, &c)| (t as u32, c)));
         let mut adj: Vec<Vec<u32>> = vec![Vec::new(); m];
         for (t, c) in self.corners.iter().enumerate() {
             for k in 0..3 {

@@ -25,6 +25,8 @@
 //!   least one of its texels is covered by another face. Faces smaller than a texel may escape
 //!   detection: that is the resolution of the measure.
 
+use std::collections::HashMap;
+
 use nuvo_geometry::{TriMesh, UvLayer};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -255,6 +257,19 @@ pub(crate) fn signed_uv_area2(uv: &UvLayer) -> Vec<f64> {
 pub(crate) fn face_uv_area2(uv: &UvLayer, f: usize) -> f64 {
     let [a, b, c] = uv.triangles[f].map(|i| uv.coords[i as usize]);
     signed_area2_2d(a, b, c)
+}
+
+/// The faces using each undirected edge `(low, high)` of `faces` (`(face id, corners)`), in the
+/// order given; shared by the passes that walk faces across edges.
+pub(crate) fn faces_by_edge(faces: impl Iterator<Item = (u32, [u32; 3])>) -> HashMap<(u32, u32), Vec<u32>> {
+    let mut by_edge: HashMap<(u32, u32), Vec<u32>> = HashMap::new();
+    for (f, c) in faces {
+        for k in 0..3 {
+            let (a, b) = (c[k], c[(k + 1) % 3]);
+            by_edge.entry((a.min(b), a.max(b))).or_default().push(f);
+        }
+    }
+    by_edge
 }
 
 /// Whether each face is degenerate in 3-D ([`DEGENERATE_AREA_REL`]).
