@@ -138,18 +138,7 @@ pub struct PackedIslands {
 pub fn pack_islands(mesh: &TriMesh, opts: &IslandPacking) -> Result<PackedIslands, AtlasError> {
     let uv = require_uv(mesh)?;
     let IslandPacking { resolution: res, gutter, rotate } = *opts;
-    if res == 0 || res > MAX_RESOLUTION {
-        return Err(AtlasError::invalid(
-            "island packing",
-            format!("resolution {res} is not in 1..={MAX_RESOLUTION} texels"),
-        ));
-    }
-    if gutter >= res {
-        return Err(AtlasError::invalid(
-            "island packing",
-            format!("a {gutter}-texel gutter leaves no room in a {res}² atlas"),
-        ));
-    }
+    check_options(opts)?;
     let (island_of_face, n) = uv_charts(mesh, uv);
     let layout = Layout::of(mesh, uv, &island_of_face, n, rotate);
     let (rect_scale, rects) = best_scale(&layout.islands, res, gutter, rotate).ok_or_else(|| {
@@ -196,6 +185,45 @@ pub fn pack_islands(mesh: &TriMesh, opts: &IslandPacking) -> Result<PackedIsland
         efficiency,
         scale: if any_regular { scale } else { 0.0 },
     })
+}
+
+/// Whether the islands of `mesh` fit the atlas of `opts` at the common `scale` (UV units per 3-D
+/// unit of length, as [`PackedIslands::scale`]): by their rectangles, or, up to
+/// [`SHAPES_UP_TO`] islands, by their shapes, in the orders [`pack_islands`] tries. One
+/// packing attempt instead of [`pack_islands`]' bisection on the scale: what a caller that
+/// asks "does this layout pack at least this tightly" needs ([`crate::necks`]). Errors as
+/// [`pack_islands`]'.
+pub fn packs_at_scale(mesh: &TriMesh, opts: &IslandPacking, scale: f64) -> Result<bool, AtlasError> {
+    let uv = require_uv(mesh)?;
+    let IslandPacking { resolution: res, gutter, rotate } = *opts;
+    check_options(opts)?;
+    let (island_of_face, n) = uv_charts(mesh, uv);
+    let layout = Layout::of(mesh, uv, &island_of_face, n, rotate);
+    let sizes: Vec<[u32; 2]> =
+        layout.islands.iter().map(|i| i.cell(scale, res).map(|x| x + gutter)).collect();
+    if pack_rects(&sizes, res, rotate).is_some() {
+        return Ok(true);
+    }
+    Ok(n <= SHAPES_UP_TO
+        && ShapeOrders::of(&layout.islands).pack(&layout.islands, scale, res, gutter, rotate).is_some())
+}
+
+/// The resolution and gutter are in range (errors name them).
+fn check_options(opts: &IslandPacking) -> Result<(), AtlasError> {
+    let IslandPacking { resolution: res, gutter, .. } = *opts;
+    if res == 0 || res > MAX_RESOLUTION {
+        return Err(AtlasError::invalid(
+            "island packing",
+            format!("resolution {res} is not in 1..={MAX_RESOLUTION} texels"),
+        ));
+    }
+    if gutter >= res {
+        return Err(AtlasError::invalid(
+            "island packing",
+            format!("a {gutter}-texel gutter leaves no room in a {res}² atlas"),
+        ));
+    }
+    Ok(())
 }
 
 /// The islands of a UV layer and the new layer's connectivity.
@@ -476,7 +504,7 @@ fn rotated(p: [f64; 2], rot: [f64; 2]) -> [f64; 2] {
 
 /// Convex hull, counter-clockwise, without collinear points (Andrew's monotone chain). Fewer than
 /// three points, or collinear ones, give their extreme points.
-fn convex_hull(points: &[[f64; 2]]) -> Vec<[f64; 2]> {
+pub(crate) fn convex_hull(points: &[[f64; 2]]) -> Vec<[f64; 2]> {
     let mut p = points.to_vec();
     p.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
     p.dedup();
@@ -504,7 +532,7 @@ fn convex_hull(points: &[[f64; 2]]) -> Vec<[f64; 2]> {
 /// The rotation `(cos, sin)` that makes the minimum-area bounding rectangle of the convex polygon
 /// `hull` axis-aligned, the smallest such angle (in `(-45°, 45°]`). The rectangle has a side on a
 /// hull edge; each edge is tried and the first of equal areas kept.
-fn min_area_rotation(hull: &[[f64; 2]]) -> [f64; 2] {
+pub(crate) fn min_area_rotation(hull: &[[f64; 2]]) -> [f64; 2] {
     if hull.len() < 2 {
         return [1.0, 0.0];
     }
@@ -641,36 +669,8 @@ fn best_shapes(
     rotate: bool,
     from: f64,
 ) -> Option<(f64, Vec<ShapePlaced>)> {
-    let by_area = {
-        let mut o: Vec<usize> = (0..islands.len()).collect();
-        let area = |i: usize| if islands[i].degenerate { -1.0 } else { islands[i].area_3d };
-        o.sort_by(|&a, &b| area(b).total_cmp(&area(a)).then(a.cmp(&b)));
-        o
-    };
-    let by_side = {
-        let mut o: Vec<usize> = (0..islands.len()).collect();
-        let side = |i: usize| {
-            let isl = &islands[i];
-            if isl.degenerate { -1.0 } else { isl.growth * isl.extent[0].max(isl.extent[1]) }
-        };
-        o.sort_by(|&a, &b| side(b).total_cmp(&side(a)).then(a.cmp(&b)));
-        o
-    };
-    let by_box = {
-        let mut o: Vec<usize> = (0..islands.len()).collect();
-        let bx = |i: usize| {
-            let isl = &islands[i];
-            if isl.degenerate { -1.0 } else { isl.growth * isl.growth * isl.extent[0] * isl.extent[1] }
-        };
-        o.sort_by(|&a, &b| bx(b).total_cmp(&bx(a)).then(a.cmp(&b)));
-        o
-    };
-    let trial = |scale: f64| {
-        let fps = shapes::footprints(islands, |i: &Island| i.texels_per_unit(scale, res), rotate);
-        shapes::pack_shapes(&fps, &by_area, res, gutter)
-            .or_else(|| shapes::pack_shapes(&fps, &by_side, res, gutter))
-            .or_else(|| shapes::pack_shapes(&fps, &by_box, res, gutter))
-    };
+    let orders = ShapeOrders::of(islands);
+    let trial = |scale: f64| orders.pack(islands, scale, res, gutter, rotate);
     let mut best = (from, trial(from)?);
     // Every face area at once cannot exceed the square: the scale at which it would fill it.
     let area: f64 = islands.iter().filter(|i| !i.degenerate).map(|i| i.area_3d).sum();
@@ -690,6 +690,44 @@ fn best_shapes(
         }
     }
     Some(best)
+}
+
+/// The orders in which [`best_shapes`] places islands, in turn (its docs).
+struct ShapeOrders {
+    by_area: Vec<usize>,
+    by_side: Vec<usize>,
+    by_box: Vec<usize>,
+}
+
+impl ShapeOrders {
+    fn of(islands: &[Island]) -> Self {
+        let order = |key: &dyn Fn(&Island) -> f64| {
+            let mut o: Vec<usize> = (0..islands.len()).collect();
+            let k = |i: usize| if islands[i].degenerate { -1.0 } else { key(&islands[i]) };
+            o.sort_by(|&a, &b| k(b).total_cmp(&k(a)).then(a.cmp(&b)));
+            o
+        };
+        ShapeOrders {
+            by_area: order(&|i| i.area_3d),
+            by_side: order(&|i| i.growth * i.extent[0].max(i.extent[1])),
+            by_box: order(&|i| i.growth * i.growth * i.extent[0] * i.extent[1]),
+        }
+    }
+
+    /// The islands' shapes packed at `scale` in the first order that fits them.
+    fn pack(
+        &self,
+        islands: &[Island],
+        scale: f64,
+        res: u32,
+        gutter: u32,
+        rotate: bool,
+    ) -> Option<Vec<ShapePlaced>> {
+        let fps = shapes::footprints(islands, |i: &Island| i.texels_per_unit(scale, res), rotate);
+        [&self.by_area, &self.by_side, &self.by_box]
+            .into_iter()
+            .find_map(|order| shapes::pack_shapes(&fps, order, res, gutter))
+    }
 }
 
 // ---- The rectangle packer -------------------------------------------------------------------

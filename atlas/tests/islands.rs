@@ -3,7 +3,7 @@
 //! small hand-made layouts with known answers and on spot's own atlas at several resolutions.
 
 use nuvo_atlas::AtlasError;
-use nuvo_atlas::islands::{IslandPacking, PackedIslands, pack_islands};
+use nuvo_atlas::islands::{IslandPacking, PackedIslands, pack_islands, packs_at_scale};
 use nuvo_atlas::load::load_mesh_with_uv;
 use nuvo_atlas::uvstats::uv_charts;
 use nuvo_geometry::testdata::data_file;
@@ -301,6 +301,21 @@ fn two_squares_of_equal_3d_area_become_equal_and_fill_half_the_atlas() {
     close("equal areas", area(0), area(1), 1e-6);
     close("efficiency", out.efficiency, 2.0 * (510.0f64 / 1024.0).powi(2), 1e-6);
     close("scale", out.scale, 510.0 / 1024.0, 1e-6);
+}
+
+#[test]
+fn one_packing_attempt_fits_at_the_scale_the_packer_finds_and_not_beyond_what_fits() {
+    // The two squares above: side by side at most 510 texels each (510 + 2 + 510 + 2 = 1024).
+    let m = mesh(&[rect(1.0, 1.0, 0.0, [0.0, 0.0], 0.1, 0.0), rect(1.0, 1.0, 1.0, [0.5, 0.5], 0.5, 0.0)]);
+    let o = opts(1024, 2, true);
+    let found = pack(&m, o).scale;
+    assert!(packs_at_scale(&m, &o, found).unwrap());
+    assert!(packs_at_scale(&m, &o, 0.5 * found).unwrap());
+    assert!(
+        !packs_at_scale(&m, &o, 512.0 / 1024.0).unwrap(),
+        "two 512-texel squares and gutters exceed 1024"
+    );
+    assert!(packs_at_scale(&m, &opts(1024, 1024, true), found).is_err(), "bad options are an error");
 }
 
 #[test]
