@@ -1573,7 +1573,7 @@ type Adjacency = Vec<Vec<(u32, f64)>>;
 /// Dijkstra over `adj` from the `sources` (distance 0), entering only vertices `may_enter`
 /// accepts; stops at the first vertex popped that `is_target` accepts. Returns the distances,
 /// each vertex's predecessor (`u32::MAX` for sources and unreached ones) and the target reached.
-fn shortest_paths(
+pub(crate) fn shortest_paths(
     adj: &[Vec<(u32, f64)>],
     sources: &[u32],
     is_target: impl Fn(u32) -> bool,

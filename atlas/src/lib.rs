@@ -14,6 +14,7 @@
 //! | [`metrics`] | Boundary, Stretch, Conformal, Editability over seeded views (definitions there) |
 //! | [`uvstats`] | charts, flips, utilisation and overlaps of a UV layout |
 //! | [`partuv`] | the PartUV comparison's charts, seams, angular score, area distortions, packing |
+//! | [`necks`] | cutting islands at their necks where the packer says the atlas gets tighter |
 //! | [`join`] | joining small islands into a neighbouring one where that stays injective |
 //! | [`refine`] | local/global ARAP refinement of each UV island from its current UVs, never adding flips |
 //! | [`injective`] | every island made injective (no flip, no self-overlap) and its distortion lowered by SLIM |
@@ -37,6 +38,7 @@ pub mod islands;
 pub mod join;
 pub mod load;
 pub mod metrics;
+pub mod necks;
 pub mod pack;
 pub mod partuv;
 pub mod pictures;

@@ -1,0 +1,561 @@
+//! Cutting UV islands at their necks where that lets the atlas pack tighter (issue 19, packing).
+//!
+//! Nuvo makes few, large islands. A square atlas holds such an island only as tightly as its
+//! shape allows: a long chart (a one-chart alligator fills 0.16 of the square) or one with limbs
+//! (a horse's chart is 0.42 of its convex hull) leaves most of the atlas empty however well the
+//! islands are placed ([`crate::islands`] already packs their shapes, not their rectangles). Cut
+//! across its narrowest place, such an island becomes two that pack closer, for one short seam.
+//!
+//! [`cut_necks`] tries cuts greedily and keeps one only when the packer itself says it helps.
+//! Definitions (exact):
+//! - **Island**: a chart of [`crate::uvstats::uv_charts`]; its UV vertices are
+//!   [`crate::refine`]'s unknowns (corners of one mesh vertex with one UV value).
+//! - **Waste** of an island: the area of its minimum-area bounding rectangle minus its UV area.
+//!   Islands are tried in order of decreasing waste (ties to the lower first face); each island
+//!   (identified by its faces) is tried once.
+//! - **Neck candidates** of an island: on its outer boundary loop (the loop of largest enclosed
+//!   area; an island whose boundary is not a set of simple loops is not cut), [`SAMPLES`] vertices
+//!   evenly spaced by arc length; every pair `(a, b)` whose shorter boundary arc is at least
+//!   [`MIN_ARC`] of the loop's length is scored by `|uv_a − uv_b| / shorter arc` (small: the
+//!   boundary comes close to itself across a narrow place, a neck). Pairs are taken in order of
+//!   score, skipping a pair whose ends both lie within `MIN_ARC / 2` of the loop from a taken
+//!   pair's, up to [`NeckOptions::candidates`].
+//! - **Cut** of a candidate: the shortest path (UV length) from `a` to `b` along mesh edges
+//!   whose inner vertices are not on any boundary. The island's faces, joined across every
+//!   edge they share except the path's, must fall in exactly two parts, each with at least
+//!   [`MIN_PART_SHARE`] of the island's UV area; otherwise the candidate is dropped. The part
+//!   without the island's first face gets its own copies of its texture coordinates, moved
+//!   beside the island (the packer lays it out anew anyway), so the two are two islands.
+//! - **Trial**: a cut must raise the packing efficiency `e` of the current layout (packed by
+//!   [`pack_islands`] with [`NeckOptions::packing`]) by a factor `1 + g`, `g` the larger of
+//!   [`NeckOptions::min_gain`]` / e` and [`NeckOptions::seam_cost`]` × L / √A` (`L` the cut's
+//!   3-D length, `A` the mesh's 3-D area: a seam must buy packing in proportion to its length
+//!   relative to the surface's size, as the renders see a seam by its length). At one texel
+//!   density the efficiency grows with the square of the common scale, so the trial is one
+//!   packing attempt ([`packs_at_scale`]) at `√(1 + g)` times the current scale, not a search.
+//!   An island's candidates are tried in order; the first that packs is kept, and the layout
+//!   is packed in full again for its new efficiency and scale (the proven ones where the full
+//!   packing's bisection finds less). The pass ends after [`NeckOptions::max_trials`] trials,
+//!   after [`NeckOptions::max_failures`] islands in a row without a kept cut (on a
+//!   marching-cubes mesh of thousands of islands no single cut moves the packing), or when
+//!   every island has been tried, or once the packing attempts (trials and probes) times the
+//!   mesh's faces reach [`NeckOptions::max_face_attempts`] (an attempt turns and rasterises
+//!   every face; a probe cut short keeps the scale proven so far); the parts of a cut are
+//!   islands that may be cut again.
+//!
+//! - **Many islands**: a layout of more than [`SHAPES_UP_TO`] islands (a marching-cubes mesh's
+//!   floaters and crumbs) is left as it is. There [`pack_islands`] packs rectangles, a trial
+//!   costs seconds, and no cut moves the packing: on an unruly bunny's density grid (3,815
+//!   islands, 350k faces) one cut was kept, for +0.002 of efficiency at 2048² and 10 s.
+//!
+//! Each part keeps the map it had (a part of an injective map is injective), so no face flips
+//! and no distortion changes; only seams and the layout do. Deterministic: the same mesh and
+//! options give the same bits.
+
+use std::collections::{HashMap, HashSet};
+
+use nuvo_geometry::{TriMesh, UvLayer};
+use serde::Serialize;
+
+use crate::error::AtlasError;
+use crate::injective::shortest_paths;
+use crate::islands::{
+    IslandPacking, SHAPES_UP_TO, convex_hull, min_area_rotation, pack_islands, packs_at_scale,
+};
+use crate::partuv::face_areas_3d;
+use crate::refine::{area2, island_unknowns};
+use crate::uvstats::{Dsu, require_uv, uv_charts, uv_islands};
+
+/// Boundary vertices sampled per island for neck candidates.
+pub const SAMPLES: usize = 48;
+/// The shorter boundary arc between a candidate's ends, as a share of the loop's length.
+pub const MIN_ARC: f64 = 0.15;
+/// The least share of an island's UV area each side of a cut must hold.
+pub const MIN_PART_SHARE: f64 = 0.05;
+/// The relative precision to which the efficiency of a kept cut is measured.
+pub const PROBE_STEP: f64 = 0.01;
+/// Islands with fewer faces are not cut.
+pub const MIN_FACES: usize = 8;
+
+/// Options of [`cut_necks`].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct NeckOptions {
+    /// How trial layouts are packed (default: 512², gutter 1, rotations on: a quarter of the
+    /// default atlas side and of its gutter, fast enough for tens of trials).
+    #[serde(skip)]
+    pub packing: IslandPacking,
+    /// Trial packings (one packing attempt at one scale each) at most (default 20).
+    pub max_trials: usize,
+    /// Candidates tried per island (default 2).
+    pub candidates: usize,
+    /// Least rise of the trial packing's efficiency for which a cut is kept (default 0.01).
+    pub min_gain: f64,
+    /// Least relative rise of the efficiency per unit of the cut's relative length `L / √A`
+    /// (default 0.25; module docs).
+    pub seam_cost: f64,
+    /// Islands in a row whose cuts are all refused after which the pass ends (default 3).
+    pub max_failures: usize,
+    /// Packing attempts (trials and probes) times the mesh's faces at most (default 2e6: 20
+    /// attempts of 0.1–0.15 s each on a 97k-face horse, the whole pass on a 6k-face cow).
+    pub max_face_attempts: usize,
+}
+
+impl Default for NeckOptions {
+    fn default() -> Self {
+        NeckOptions {
+            packing: IslandPacking { resolution: 512, gutter: 1, rotate: true },
+            max_trials: 20,
+            candidates: 2,
+            min_gain: 0.01,
+            seam_cost: 0.25,
+            max_failures: 3,
+            max_face_attempts: 2_000_000,
+        }
+    }
+}
+
+/// What [`cut_necks`] did.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct NeckReport {
+    /// Cuts kept (each adds one island).
+    pub cuts: usize,
+    /// Trial packings run (one attempt at one scale each).
+    pub trials: usize,
+    /// Packing attempts measuring how much tighter a kept cut packs (to [`PROBE_STEP`]).
+    pub probes: usize,
+    /// The trial packing's efficiency before and after (at [`NeckOptions::packing`]).
+    pub efficiency_before: f64,
+    /// The same after.
+    pub efficiency_after: f64,
+    /// Summed 3-D length of the cuts kept.
+    pub seam_added: f64,
+    /// Not run: the layout has more than [`SHAPES_UP_TO`] islands (module docs).
+    pub skipped: bool,
+}
+
+/// The mesh with its islands cut and what was done.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Necked {
+    /// Same positions, triangles and face order; the UV layer with the cuts (islands not yet
+    /// packed: a part sits beside the island it came from).
+    pub mesh: TriMesh,
+    /// The summary.
+    pub report: NeckReport,
+}
+
+/// Cuts islands of `mesh` at their necks where the packing gains (module docs).
+/// Errors: no UVs; the trial packing's errors.
+pub fn cut_necks(mesh: &TriMesh, opts: &NeckOptions) -> Result<Necked, AtlasError> {
+    let uv = require_uv(mesh)?;
+    if uv_charts(mesh, uv).1 > SHAPES_UP_TO {
+        let report = NeckReport { skipped: true, ..Default::default() };
+        return Ok(Necked { mesh: mesh.clone(), report });
+    }
+    let mut current = mesh.clone();
+    let packed = pack_islands(&current, &opts.packing)?;
+    let (mut efficiency, mut scale) = (packed.efficiency, packed.scale);
+    let mut report = NeckReport { efficiency_before: efficiency, ..Default::default() };
+    let mut tried: HashSet<Vec<u32>> = HashSet::new();
+    let size = face_areas_3d(mesh).iter().sum::<f64>().sqrt();
+    let mut failures = 0;
+    // Every packing attempt costs about the same per face (the islands' turns and shapes).
+    let faces = mesh.triangles.len().max(1);
+    let affordable = |r: &NeckReport| (r.trials + r.probes) * faces < opts.max_face_attempts;
+    while report.trials < opts.max_trials
+        && failures < opts.max_failures
+        && scale > 0.0
+        && affordable(&report)
+    {
+        let uv = require_uv(&current)?;
+        let mut islands = uv_islands(&current, uv);
+        islands.retain(|f| f.len() >= MIN_FACES && !tried.contains(f));
+        let wastes: Vec<f64> = islands.iter().map(|f| waste(uv, f)).collect();
+        let Some(pick) = (0..islands.len()).max_by(|&a, &b| wastes[a].total_cmp(&wastes[b]).then(b.cmp(&a)))
+        else {
+            break;
+        };
+        let faces = islands.swap_remove(pick);
+        tried.insert(faces.clone());
+        let mut kept = None;
+        for (side, seam) in neck_cuts(&current, uv, &faces, opts.candidates) {
+            if report.trials >= opts.max_trials || !affordable(&report) {
+                break;
+            }
+            // The efficiency this cut must reach, as a factor on the current one (module docs);
+            // at one texel density the efficiency grows with the square of the scale.
+            let rise =
+                1.0 + (opts.min_gain / efficiency).max(opts.seam_cost * seam / size.max(f64::MIN_POSITIVE));
+            let target = scale * rise.sqrt();
+            let trial = apply_cut(&current, uv, &faces, &side);
+            report.trials += 1;
+            if packs_at_scale(&trial, &opts.packing, target)? {
+                kept = Some((trial, seam, rise));
+                break;
+            }
+        }
+        let Some((trial, seam, rise)) = kept else {
+            failures += 1;
+            continue;
+        };
+        // The cut usually packs tighter than it had to: find how much, to `PROBE_STEP`.
+        let (mut lo, mut step) = (rise, PROBE_STEP);
+        let mut hi = None;
+        while hi.is_none_or(|h: f64| h / lo > 1.0 + PROBE_STEP) && affordable(&report) {
+            let next = match hi {
+                None => lo * (1.0 + step),
+                Some(h) => (lo * h).sqrt(),
+            };
+            report.probes += 1;
+            if packs_at_scale(&trial, &opts.packing, scale * next.sqrt())? {
+                lo = next;
+                step *= 2.0;
+            } else {
+                hi = Some(next);
+            }
+        }
+        (efficiency, scale) = (efficiency * lo, scale * lo.sqrt());
+        current = trial;
+        report.cuts += 1;
+        report.seam_added += seam;
+        failures = 0;
+    }
+    report.efficiency_after = efficiency;
+    Ok(Necked { mesh: current, report })
+}
+
+/// The island's minimum-area bounding rectangle's area minus its UV area.
+fn waste(uv: &UvLayer, faces: &[u32]) -> f64 {
+    let points: Vec<[f64; 2]> = faces
+        .iter()
+        .flat_map(|&f| uv.triangles[f as usize].map(|i| uv.coords[i as usize].map(f64::from)))
+        .collect();
+    let hull = convex_hull(&points);
+    let rot = min_area_rotation(&hull);
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in &hull {
+        let q = [rot[0] * p[0] - rot[1] * p[1], rot[1] * p[0] + rot[0] * p[1]];
+        for k in 0..2 {
+            lo[k] = lo[k].min(q[k]);
+            hi[k] = hi[k].max(q[k]);
+        }
+    }
+    let rect = if hull.len() >= 3 { (hi[0] - lo[0]) * (hi[1] - lo[1]) } else { 0.0 };
+    rect - faces.iter().map(|&f| 0.5 * area2(tri(uv, f)).abs()).sum::<f64>()
+}
+
+fn tri(uv: &UvLayer, f: u32) -> [[f64; 2]; 3] {
+    uv.triangles[f as usize].map(|i| uv.coords[i as usize].map(f64::from))
+}
+
+/// The candidate cuts of an island (module docs), each as the side of each of `faces` (true:
+/// the part that moves) and the cut's 3-D length.
+fn neck_cuts(mesh: &TriMesh, uv: &UvLayer, faces: &[u32], count: usize) -> Vec<(Vec<bool>, f64)> {
+    let (corners, n) = island_unknowns(mesh, uv, faces);
+    let mut pos = vec![[0.0f64; 2]; n];
+    let mut vertex = vec![0u32; n];
+    for (t, c) in corners.iter().enumerate() {
+        for k in 0..3 {
+            pos[c[k] as usize] = uv.coords[uv.triangles[faces[t] as usize][k] as usize].map(f64::from);
+            vertex[c[k] as usize] = mesh.triangles[faces[t] as usize][k];
+        }
+    }
+    let length3 = |a: u32, b: u32| {
+        let (p, q) =
+            (mesh.positions[vertex[a as usize] as usize], mesh.positions[vertex[b as usize] as usize]);
+        (0..3).map(|k| (p[k] as f64 - q[k] as f64).powi(2)).sum::<f64>().sqrt()
+    };
+    let dist = |a: u32, b: u32| {
+        let (p, q) = (pos[a as usize], pos[b as usize]);
+        ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt()
+    };
+    // Undirected edges and their uses; directed boundary edges.
+    let mut uses: HashMap<(u32, u32), u32> = HashMap::new();
+    for c in &corners {
+        for k in 0..3 {
+            let (a, b) = (c[k], c[(k + 1) % 3]);
+            *uses.entry((a.min(b), a.max(b))).or_default() += 1;
+        }
+    }
+    let mut next: Vec<Option<u32>> = vec![None; n];
+    let mut on_boundary = vec![false; n];
+    for c in &corners {
+        if c[0] == c[1] || c[1] == c[2] || c[0] == c[2] {
+            continue;
+        }
+        for k in 0..3 {
+            let (a, b) = (c[k], c[(k + 1) % 3]);
+            if uses[&(a.min(b), a.max(b))] == 1 {
+                if next[a as usize].is_some() {
+                    return Vec::new(); // two boundary edges leave one vertex: not simple loops
+                }
+                next[a as usize] = Some(b);
+                (on_boundary[a as usize], on_boundary[b as usize]) = (true, true);
+            }
+        }
+    }
+    // The loops; the outer one encloses the largest area.
+    let mut seen = vec![false; n];
+    let mut outer: Option<(f64, Vec<u32>)> = None;
+    for s in 0..n as u32 {
+        if seen[s as usize] || next[s as usize].is_none() {
+            continue;
+        }
+        let mut lp = Vec::new();
+        let mut v = s;
+        while !seen[v as usize] {
+            seen[v as usize] = true;
+            lp.push(v);
+            let Some(w) = next[v as usize] else { return Vec::new() };
+            v = w;
+        }
+        if v != s {
+            return Vec::new();
+        }
+        let area: f64 = (0..lp.len())
+            .map(|i| {
+                let (p, q) = (pos[lp[i] as usize], pos[lp[(i + 1) % lp.len()] as usize]);
+                p[0] * q[1] - p[1] * q[0]
+            })
+            .sum::<f64>()
+            .abs();
+        if outer.as_ref().is_none_or(|(a, _)| area > *a) {
+            outer = Some((area, lp));
+        }
+    }
+    let Some((_, lp)) = outer else { return Vec::new() };
+    let m = lp.len();
+    let mut arc = vec![0.0; m + 1];
+    for i in 0..m {
+        arc[i + 1] = arc[i] + dist(lp[i], lp[(i + 1) % m]);
+    }
+    let perimeter = arc[m];
+    if perimeter.is_nan() || perimeter <= 0.0 || m < 4 {
+        return Vec::new();
+    }
+    // Samples evenly by arc length (first loop vertex at or after each mark).
+    let mut samples: Vec<usize> = Vec::new();
+    let mut i = 0;
+    for s in 0..SAMPLES {
+        let mark = perimeter * s as f64 / SAMPLES as f64;
+        while i < m && arc[i] < mark {
+            i += 1;
+        }
+        if i < m && samples.last() != Some(&i) {
+            samples.push(i);
+        }
+    }
+    let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
+    for (x, &a) in samples.iter().enumerate() {
+        for &b in &samples[x + 1..] {
+            let along = arc[b] - arc[a];
+            let shorter = along.min(perimeter - along);
+            if shorter >= MIN_ARC * perimeter {
+                pairs.push((dist(lp[a], lp[b]) / shorter, a, b));
+            }
+        }
+    }
+    pairs.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)).then(x.2.cmp(&y.2)));
+    let near = |i: usize, j: usize| {
+        let d = (arc[i] - arc[j]).abs();
+        d.min(perimeter - d) < 0.5 * MIN_ARC * perimeter
+    };
+    // Vertex adjacency with UV lengths, for the paths.
+    let mut adj: Vec<Vec<(u32, f64)>> = vec![Vec::new(); n];
+    let mut edges: Vec<&(u32, u32)> = uses.keys().collect();
+    edges.sort();
+    for &&(a, b) in &edges {
+        if a != b {
+            adj[a as usize].push((b, dist(a, b)));
+            adj[b as usize].push((a, dist(a, b)));
+        }
+    }
+    let total: f64 = faces.iter().map(|&f| 0.5 * area2(tri(uv, f)).abs()).sum();
+    let mut taken: Vec<(usize, usize)> = Vec::new();
+    let mut cuts = Vec::new();
+    for &(_, a, b) in &pairs {
+        if cuts.len() >= count {
+            break;
+        }
+        if taken.iter().any(|&(x, y)| (near(a, x) && near(b, y)) || (near(a, y) && near(b, x))) {
+            continue;
+        }
+        let (va, vb) = (lp[a], lp[b]);
+        let (_, prev, reached) =
+            shortest_paths(&adj, &[va], |v| v == vb, |v| v == vb || !on_boundary[v as usize]);
+        if reached.is_none() {
+            continue;
+        }
+        let mut cut_edges: HashSet<(u32, u32)> = HashSet::new();
+        let mut v = vb;
+        let mut seam = 0.0;
+        while v != va {
+            let p = prev[v as usize];
+            cut_edges.insert((p.min(v), p.max(v)));
+            seam += length3(p, v);
+            v = p;
+        }
+        let Some(side) = two_parts(&corners, &cut_edges) else { continue };
+        let moved: f64 =
+            faces.iter().zip(&side).filter(|(_, s)| **s).map(|(&f, _)| 0.5 * area2(tri(uv, f)).abs()).sum();
+        if moved < MIN_PART_SHARE * total || total - moved < MIN_PART_SHARE * total {
+            continue;
+        }
+        taken.push((a, b));
+        cuts.push((side, seam));
+    }
+    cuts
+}
+
+/// The island's faces joined across the edges they share except `cut`: for exactly two parts,
+/// whether each face is in the part without the first face.
+fn two_parts(corners: &[[u32; 3]], cut: &HashSet<(u32, u32)>) -> Option<Vec<bool>> {
+    let mut first: HashMap<(u32, u32), u32> = HashMap::new();
+    let mut dsu = Dsu::new(corners.len());
+    for (t, c) in corners.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (c[k], c[(k + 1) % 3]);
+            let e = (a.min(b), a.max(b));
+            if cut.contains(&e) {
+                continue;
+            }
+            match first.get(&e) {
+                Some(&o) => dsu.union(o, t as u32),
+                None => {
+                    first.insert(e, t as u32);
+                }
+            }
+        }
+    }
+    let root = dsu.find(0);
+    let side: Vec<bool> = (0..corners.len() as u32).map(|t| dsu.find(t) != root).collect();
+    let other = side.iter().position(|&s| s)?;
+    let other_root = dsu.find(other as u32);
+    (0..corners.len() as u32).all(|t| dsu.find(t) == root || dsu.find(t) == other_root).then_some(side)
+}
+
+/// `mesh` with the faces of `faces` on the moved `side` given their own texture coordinates,
+/// moved beside the island so the two parts are two islands.
+fn apply_cut(mesh: &TriMesh, uv: &UvLayer, faces: &[u32], side: &[bool]) -> TriMesh {
+    let (mut lo, mut hi) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
+    for &f in faces {
+        for i in uv.triangles[f as usize] {
+            let p = uv.coords[i as usize];
+            for k in 0..2 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+    }
+    let shift = 2.0 * (hi[0] - lo[0]).max(hi[1] - lo[1]).max(f32::MIN_POSITIVE);
+    let mut coords = uv.coords.clone();
+    let mut triangles = uv.triangles.clone();
+    let mut copy: HashMap<u32, u32> = HashMap::new();
+    for (&f, _) in faces.iter().zip(side).filter(|(_, s)| **s) {
+        triangles[f as usize] = uv.triangles[f as usize].map(|i| {
+            *copy.entry(i).or_insert_with(|| {
+                let p = uv.coords[i as usize];
+                coords.push([p[0] + shift, p[1]]);
+                (coords.len() - 1) as u32
+            })
+        });
+    }
+    TriMesh { uv: Some(UvLayer { coords, triangles }), ..mesh.clone() }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testmesh::grid;
+    use crate::uvstats::uv_charts;
+
+    /// The flat grid over `[0, w] × [0, h]` (`n × m` quads) keeping the faces whose centre
+    /// `keep` accepts, with UV = position.
+    fn shape(n: u32, m: u32, w: f32, h: f32, keep: impl Fn(f32, f32) -> bool) -> TriMesh {
+        let base = grid(n.max(m), |p| [p[0], p[1]]);
+        let k = n.max(m) as f32;
+        let positions: Vec<[f32; 3]> = base
+            .positions
+            .iter()
+            .map(|p| [(p[0] + 1.0) * 0.5 * k / n as f32 * w, (p[1] + 1.0) * 0.5 * k / m as f32 * h, 0.0])
+            .collect();
+        let triangles: Vec<[u32; 3]> = base
+            .triangles
+            .iter()
+            .copied()
+            .filter(|t| {
+                let c = t.map(|v| positions[v as usize]);
+                let (x, y) = ((c[0][0] + c[1][0] + c[2][0]) / 3.0, (c[0][1] + c[1][1] + c[2][1]) / 3.0);
+                x < w && y < h && keep(x, y)
+            })
+            .collect();
+        let coords = positions.iter().map(|p| [p[0], p[1]]).collect();
+        TriMesh { positions, uv: Some(UvLayer { coords, triangles: triangles.clone() }), triangles }
+    }
+
+    /// Each face's UV triangle is the input's moved by a translation only.
+    fn translated_only(before: &TriMesh, after: &TriMesh) -> bool {
+        let (a, b) = (before.uv.as_ref().unwrap(), after.uv.as_ref().unwrap());
+        (0..before.triangles.len()).all(|f| {
+            let (s, t) = (tri(a, f as u32), tri(b, f as u32));
+            (1..3).all(|k| (0..2).all(|c| ((s[k][c] - s[0][c]) - (t[k][c] - t[0][c])).abs() < 1e-5))
+        })
+    }
+
+    #[test]
+    fn a_long_strip_is_cut_and_packs_tighter() {
+        let mesh = shape(32, 4, 8.0, 1.0, |_, _| true);
+        let out = cut_necks(&mesh, &NeckOptions::default()).unwrap();
+        assert!(out.report.cuts >= 1, "{:?}", out.report);
+        assert!(out.report.efficiency_after >= out.report.efficiency_before + 0.01, "{:?}", out.report);
+        let before = pack_islands(&mesh, &IslandPacking::default()).unwrap().efficiency;
+        let after = pack_islands(&out.mesh, &IslandPacking::default()).unwrap().efficiency;
+        assert!(after > 1.5 * before, "{before} -> {after}");
+        assert!(translated_only(&mesh, &out.mesh));
+        let uv = out.mesh.uv.as_ref().unwrap();
+        assert_eq!(uv_charts(&out.mesh, uv).1, out.report.cuts + 1);
+        assert!(out.report.seam_added > 0.0);
+    }
+
+    #[test]
+    fn a_dumbbell_is_cut_across_its_bridge() {
+        // Two 2 × 2 squares joined by a 2-long bridge a quarter as wide.
+        let mesh = shape(48, 16, 6.0, 2.0, |x, y| !(2.0..4.0).contains(&x) || (0.75..1.25).contains(&y));
+        let opts = NeckOptions { max_trials: 1, ..Default::default() };
+        let out = cut_necks(&mesh, &opts).unwrap();
+        assert_eq!(out.report.cuts, 1, "{:?}", out.report);
+        let (chart, n) = uv_charts(&out.mesh, out.mesh.uv.as_ref().unwrap());
+        assert_eq!(n, 2);
+        let centre_x = |f: usize| out.mesh.corners(f).iter().map(|p| p[0]).sum::<f32>() / 3.0;
+        let (left, right): (Vec<usize>, Vec<usize>) = (0..chart.len())
+            .filter(|&f| !(2.0..4.0).contains(&centre_x(f)))
+            .partition(|&f| centre_x(f) < 2.0);
+        let side = |faces: &[usize]| faces.iter().map(|&f| chart[f]).collect::<HashSet<u32>>();
+        assert_eq!(side(&left).len(), 1, "the left square is in one island");
+        assert_eq!(side(&right).len(), 1, "the right square is in one island");
+        assert_ne!(side(&left), side(&right), "and the right square in the other");
+        assert!(translated_only(&mesh, &out.mesh));
+    }
+
+    #[test]
+    fn a_layout_of_very_many_islands_is_left_as_it_is() {
+        // A long strip, every face its own island, with more islands than shapes are packed.
+        let strip = shape(SHAPES_UP_TO as u32, 1, 8.0, 1.0, |_, _| true);
+        let apart = crate::testmesh::with_uv_per_corner(&strip, |f, _, p| [p[0] + 10.0 * f as f32, p[1]]);
+        let out = cut_necks(&apart, &NeckOptions::default()).unwrap();
+        assert!(out.report.skipped && out.report.cuts == 0);
+        assert_eq!(out.mesh, apart);
+    }
+
+    #[test]
+    fn a_square_is_left_whole_and_a_costly_seam_is_refused() {
+        let square = shape(8, 8, 1.0, 1.0, |_, _| true);
+        let out = cut_necks(&square, &NeckOptions::default()).unwrap();
+        assert_eq!(out.report.cuts, 0);
+        assert_eq!(out.mesh, square);
+        let strip = shape(32, 4, 8.0, 1.0, |_, _| true);
+        let opts = NeckOptions { seam_cost: 1e3, ..Default::default() };
+        let out = cut_necks(&strip, &opts).unwrap();
+        assert_eq!((out.report.cuts, out.report.efficiency_after), (0, out.report.efficiency_before));
+        assert_eq!(out.mesh, strip);
+    }
+}
