@@ -169,6 +169,12 @@ fn print_report(report: &OutputReport, seconds: f64) {
             b.reassigned_faces,
             b.absorbed_faces
         );
+        if let Some(n) = &m.layout.necks {
+            println!(
+                "       islands cut at their necks: {} (packing efficiency at 512²: {:.3} -> {:.3}; {} trials)",
+                n.cuts, n.efficiency_before, n.efficiency_after, n.trials
+            );
+        }
     }
     for f in &report.files {
         println!("wrote {}", f.display());

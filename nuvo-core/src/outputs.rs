@@ -31,6 +31,7 @@ use nuvo_atlas::injective::{InjectiveOptions, InjectiveReport, make_injective};
 use nuvo_atlas::islands::{IslandPacking, pack_islands};
 use nuvo_atlas::join::{JoinOptions, JoinReport, join_small_islands};
 use nuvo_atlas::metrics::{EvalOptions, Metrics, evaluate};
+use nuvo_atlas::necks::{NeckOptions, NeckReport, cut_necks};
 use nuvo_atlas::pack::AtlasLayout;
 use nuvo_atlas::pictures::{
     ChartGrid, chart_grid_image, checkerboard, pack_images, png_bytes, render_textured, uv_layout, write_png,
@@ -114,6 +115,8 @@ pub struct LayoutSummary {
     pub injective: Option<InjectiveReport>,
     /// What joining small islands did (`output.join`, after `injective`).
     pub join: Option<JoinReport>,
+    /// What cutting islands at their necks did (`output.cut_necks`, before packing).
+    pub necks: Option<NeckReport>,
     /// Islands packed, with `packing = "islands"`.
     pub islands: Option<usize>,
 }
@@ -121,8 +124,14 @@ pub struct LayoutSummary {
 /// Refines and packs the baked layout as `opts` asks (both off: the bake as it is).
 fn finish_layout(mesh: TriMesh, opts: &OutputConfig) -> Result<(TriMesh, LayoutSummary), OutputError> {
     let mut mesh = mesh;
-    let mut summary =
-        LayoutSummary { packing: opts.packing, refine: None, injective: None, join: None, islands: None };
+    let mut summary = LayoutSummary {
+        packing: opts.packing,
+        refine: None,
+        injective: None,
+        join: None,
+        necks: None,
+        islands: None,
+    };
     if opts.refine {
         let refined = refine_islands(&mesh, &RefineOptions::default())?;
         mesh = refined.mesh;
@@ -142,6 +151,11 @@ fn finish_layout(mesh: TriMesh, opts: &OutputConfig) -> Result<(TriMesh, LayoutS
         let joined = join_small_islands(&mesh, &JoinOptions::default())?;
         mesh = joined.mesh;
         summary.join = Some(joined.report);
+    }
+    if opts.packing == Packing::Islands && opts.cut_necks {
+        let necked = cut_necks(&mesh, &NeckOptions::default())?;
+        mesh = necked.mesh;
+        summary.necks = Some(necked.report);
     }
     if opts.packing == Packing::Islands {
         let packing = IslandPacking { resolution: opts.atlas_resolution, gutter: opts.gutter, rotate: true };
