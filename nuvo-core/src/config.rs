@@ -287,9 +287,9 @@ pub struct OutputConfig {
     /// With `packing = "islands"`: cut islands across their necks where the atlas then packs
     /// tighter (not in the paper; `nuvo_atlas::necks`): cuts are tried greedily on the islands
     /// that waste most of their bounding rectangle and kept only when a trial packing gains in
-    /// proportion to the seam's length. Off by default, on in `nuvo unwrap` (Common Shapes:
-    /// packing efficiency 0.51 -> 0.62 for 0.003 of Editability, BENCHMARKS.md "Cutting islands
-    /// at their necks").
+    /// proportion to the seam's length; with `injective`, SLIM then relaxes the parts from their
+    /// maps. Off by default, on in `nuvo unwrap` (Common Shapes: packing efficiency 0.51 -> 0.60,
+    /// Editability 0.9568 -> 0.9557, BENCHMARKS.md "Cutting islands at their necks").
     pub cut_necks: bool,
     /// How the atlas is laid out: `"squares"` (default, the paper's: one square cell per chart) or
     /// `"islands"` (not in the paper; `nuvo_atlas::islands`: every UV island packed on its own at

@@ -138,12 +138,7 @@ fn finish_layout(mesh: TriMesh, opts: &OutputConfig) -> Result<(TriMesh, LayoutS
         summary.refine = Some(refined.report);
     }
     if opts.injective {
-        // Split parts lie on each other until packed, so only island packing may split.
-        let split = opts.packing == Packing::Islands;
-        let injective = make_injective(
-            &mesh,
-            &InjectiveOptions { split, split_energy: opts.injective_split_energy, ..Default::default() },
-        )?;
+        let injective = make_injective(&mesh, &injective_options(opts))?;
         mesh = injective.mesh;
         summary.injective = Some(injective.report);
     }
@@ -155,6 +150,11 @@ fn finish_layout(mesh: TriMesh, opts: &OutputConfig) -> Result<(TriMesh, LayoutS
     if opts.packing == Packing::Islands && opts.cut_necks {
         let necked = cut_necks(&mesh, &NeckOptions::default())?;
         mesh = necked.mesh;
+        if necked.report.cuts > 0 && opts.injective {
+            // A cut frees the parts' boundary where they were joined: SLIM relaxes them from
+            // their maps (the other islands are already converged and stop after one round).
+            mesh = make_injective(&mesh, &injective_options(opts))?.mesh;
+        }
         summary.necks = Some(necked.report);
     }
     if opts.packing == Packing::Islands {
@@ -164,6 +164,13 @@ fn finish_layout(mesh: TriMesh, opts: &OutputConfig) -> Result<(TriMesh, LayoutS
         summary.islands = Some(packed.islands);
     }
     Ok((mesh, summary))
+}
+
+/// `make_injective`'s options for `opts`.
+fn injective_options(opts: &OutputConfig) -> InjectiveOptions {
+    // Split parts lie on each other until packed, so only island packing may split.
+    let split = opts.packing == Packing::Islands;
+    InjectiveOptions { split, split_energy: opts.injective_split_energy, ..Default::default() }
 }
 
 /// What `metrics.json` holds.

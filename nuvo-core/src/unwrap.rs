@@ -248,8 +248,8 @@ pub fn recipe(r: &RecipeInput) -> String {
     // themselves, chart enclaves").
     bake += "absorb_enclaves = true\n";
     // Islands that waste most of their rectangle are cut across their necks where a trial
-    // packing gains in proportion to the seam (Common Shapes: efficiency 0.51 -> 0.62; no cut
-    // pays on the unruly meshes, whose thousands of islands pack as rectangles; BENCHMARKS.md,
+    // packing gains in proportion to the seam (Common Shapes: efficiency 0.51 -> 0.60; layouts
+    // of thousands of islands, as on marching-cubes meshes, are left alone; BENCHMARKS.md,
     // "Cutting islands at their necks").
     bake += "cut_necks = true\n";
     if !clean {
