@@ -33,24 +33,25 @@
 //!   relative to the surface's size, as the renders see a seam by its length). At one texel
 //!   density the efficiency grows with the square of the common scale, so the trial is one
 //!   packing attempt ([`packs_at_scale`]) at `√(1 + g)` times the current scale, not a search.
-//!   An island's candidates are tried in order; the first that packs is kept, and the layout
-//!   is packed in full again for its new efficiency and scale (the proven ones where the full
-//!   packing's bisection finds less). The pass ends after [`NeckOptions::max_trials`] trials,
+//!   An island's candidates are tried in order and the first that packs is kept; how much
+//!   tighter it packs is then measured to [`PROBE_STEP`] by further attempts (*probes*: steps
+//!   up that double until one fails, then bisection), and the scale proven last becomes the
+//!   current one. The pass ends after [`NeckOptions::max_trials`] trials,
 //!   after [`NeckOptions::max_failures`] islands in a row without a kept cut (on a
 //!   marching-cubes mesh of thousands of islands no single cut moves the packing), or when
 //!   every island has been tried, or once the packing attempts (trials and probes) times the
 //!   mesh's faces reach [`NeckOptions::max_face_attempts`] (an attempt turns and rasterises
 //!   every face; a probe cut short keeps the scale proven so far); the parts of a cut are
 //!   islands that may be cut again.
-//!
 //! - **Many islands**: a layout of more than [`SHAPES_UP_TO`] islands (a marching-cubes mesh's
 //!   floaters and crumbs) is left as it is. There [`pack_islands`] packs rectangles, a trial
 //!   costs seconds, and no cut moves the packing: on an unruly bunny's density grid (3,815
 //!   islands, 350k faces) one cut was kept, for +0.002 of efficiency at 2048² and 10 s.
 //!
 //! Each part keeps the map it had (a part of an injective map is injective), so no face flips
-//! and no distortion changes; only seams and the layout do. Deterministic: the same mesh and
-//! options give the same bits.
+//! and no distortion changes; only seams and the layout do (the bake's caller then relaxes the
+//! parts with SLIM, [`crate::injective`], when it makes islands injective). Deterministic: the
+//! same mesh and options give the same bits.
 
 use std::collections::{HashMap, HashSet};
 
