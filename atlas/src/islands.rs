@@ -199,8 +199,14 @@ pub fn packs_at_scale(mesh: &TriMesh, opts: &IslandPacking, scale: f64) -> Resul
     check_options(opts)?;
     let (island_of_face, n) = uv_charts(mesh, uv);
     let layout = Layout::of(mesh, uv, &island_of_face, n, rotate);
+    // No packing fills more than the square, nor holds a cell longer than its side: answered
+    // without rasterising footprints at a scale far beyond any that could fit.
+    let area: f64 = layout.islands.iter().filter(|i| !i.degenerate).map(|i| i.area_3d).sum();
     let sizes: Vec<[u32; 2]> =
-        layout.islands.iter().map(|i| i.cell(scale, res).map(|x| x + gutter)).collect();
+        layout.islands.iter().map(|i| i.cell(scale, res).map(|x| x.saturating_add(gutter))).collect();
+    if !(scale.is_finite() && area * scale * scale <= 1.0 && sizes.iter().flatten().all(|&x| x <= res)) {
+        return Ok(false);
+    }
     if pack_rects(&sizes, res, rotate).is_some() {
         return Ok(true);
     }

@@ -2,7 +2,7 @@
 //!
 //! Nuvo makes few, large islands. A square atlas holds such an island only as tightly as its
 //! shape allows: a long chart (a one-chart alligator fills 0.16 of the square) or one with limbs
-//! (a horse's chart is 0.42 of its convex hull) leaves most of the atlas empty however well the
+//! (a horse's chart is 0.46 of its convex hull) leaves most of the atlas empty however well the
 //! islands are placed ([`crate::islands`] already packs their shapes, not their rectangles). Cut
 //! across its narrowest place, such an island becomes two that pack closer, for one short seam.
 //!
@@ -10,9 +10,10 @@
 //! Definitions (exact):
 //! - **Island**: a chart of [`crate::uvstats::uv_charts`]; its UV vertices are
 //!   [`crate::refine`]'s unknowns (corners of one mesh vertex with one UV value).
-//! - **Waste** of an island: the area of its minimum-area bounding rectangle minus its UV area.
-//!   Islands are tried in order of decreasing waste (ties to the lower first face); each island
-//!   (identified by its faces) is tried once.
+//! - **Waste** of an island: the area of its minimum-area bounding rectangle minus its UV area,
+//!   times its 3-D over its UV area (islands come at different texel densities until packed).
+//!   Islands of at least [`MIN_FACES`] faces are tried in order of decreasing waste (ties to
+//!   the lower first face); each island (identified by its faces) is tried once.
 //! - **Neck candidates** of an island: on its outer boundary loop (the loop of largest enclosed
 //!   area; an island whose boundary is not a set of simple loops is not cut), [`SAMPLES`] vertices
 //!   evenly spaced by arc length; every pair `(a, b)` whose shorter boundary arc is at least
@@ -64,8 +65,9 @@ use crate::islands::{
     IslandPacking, SHAPES_UP_TO, convex_hull, min_area_rotation, pack_islands, packs_at_scale,
 };
 use crate::partuv::face_areas_3d;
-use crate::refine::{area2, island_unknowns};
-use crate::uvstats::{Dsu, require_uv, uv_charts, uv_islands};
+use crate::refine::island_unknowns;
+use crate::uvstats::{Dsu, face_uv_area2, require_uv, uv_charts, uv_islands};
+use crate::vecmath::{norm, sub, v3};
 
 /// Boundary vertices sampled per island for neck candidates.
 pub const SAMPLES: usize = 48;
@@ -124,9 +126,10 @@ pub struct NeckReport {
     pub trials: usize,
     /// Packing attempts measuring how much tighter a kept cut packs (to [`PROBE_STEP`]).
     pub probes: usize,
-    /// The trial packing's efficiency before and after (at [`NeckOptions::packing`]).
+    /// The packing efficiency before, at [`NeckOptions::packing`] (0 when skipped).
     pub efficiency_before: f64,
-    /// The same after.
+    /// The same after: the efficiency proven by the last kept cut's probes (to [`PROBE_STEP`]
+    /// below the packer's own), before any later relaxing of the parts.
     pub efficiency_after: f64,
     /// Summed 3-D length of the cuts kept.
     pub seam_added: f64,
@@ -157,7 +160,8 @@ pub fn cut_necks(mesh: &TriMesh, opts: &NeckOptions) -> Result<Necked, AtlasErro
     let (mut efficiency, mut scale) = (packed.efficiency, packed.scale);
     let mut report = NeckReport { efficiency_before: efficiency, ..Default::default() };
     let mut tried: HashSet<Vec<u32>> = HashSet::new();
-    let size = face_areas_3d(mesh).iter().sum::<f64>().sqrt();
+    let areas = face_areas_3d(mesh);
+    let size = areas.iter().sum::<f64>().sqrt();
     let mut failures = 0;
     // Every packing attempt costs about the same per face (the islands' turns and shapes).
     let faces = mesh.triangles.len().max(1);
@@ -170,7 +174,7 @@ pub fn cut_necks(mesh: &TriMesh, opts: &NeckOptions) -> Result<Necked, AtlasErro
         let uv = require_uv(&current)?;
         let mut islands = uv_islands(&current, uv);
         islands.retain(|f| f.len() >= MIN_FACES && !tried.contains(f));
-        let wastes: Vec<f64> = islands.iter().map(|f| waste(uv, f)).collect();
+        let wastes: Vec<f64> = islands.iter().map(|f| waste(uv, &areas, f)).collect();
         let Some(pick) = (0..islands.len()).max_by(|&a, &b| wastes[a].total_cmp(&wastes[b]).then(b.cmp(&a)))
         else {
             break;
@@ -224,8 +228,9 @@ pub fn cut_necks(mesh: &TriMesh, opts: &NeckOptions) -> Result<Necked, AtlasErro
     Ok(Necked { mesh: current, report })
 }
 
-/// The island's minimum-area bounding rectangle's area minus its UV area.
-fn waste(uv: &UvLayer, faces: &[u32]) -> f64 {
+/// The island's minimum-area bounding rectangle's area minus its UV area, in units of 3-D area
+/// (islands come at different texel densities: each chart was baked into its own square).
+fn waste(uv: &UvLayer, areas: &[f64], faces: &[u32]) -> f64 {
     let points: Vec<[f64; 2]> = faces
         .iter()
         .flat_map(|&f| uv.triangles[f as usize].map(|i| uv.coords[i as usize].map(f64::from)))
@@ -241,11 +246,14 @@ fn waste(uv: &UvLayer, faces: &[u32]) -> f64 {
         }
     }
     let rect = if hull.len() >= 3 { (hi[0] - lo[0]) * (hi[1] - lo[1]) } else { 0.0 };
-    rect - faces.iter().map(|&f| 0.5 * area2(tri(uv, f)).abs()).sum::<f64>()
+    let area_uv = uv_area(uv, faces);
+    let area_3d: f64 = faces.iter().map(|&f| areas[f as usize]).sum();
+    if area_uv > 0.0 { (rect - area_uv) * area_3d / area_uv } else { 0.0 }
 }
 
-fn tri(uv: &UvLayer, f: u32) -> [[f64; 2]; 3] {
-    uv.triangles[f as usize].map(|i| uv.coords[i as usize].map(f64::from))
+/// The summed unsigned UV area of `faces`.
+fn uv_area(uv: &UvLayer, faces: &[u32]) -> f64 {
+    faces.iter().map(|&f| 0.5 * face_uv_area2(uv, f as usize).abs()).sum()
 }
 
 /// The candidate cuts of an island (module docs), each as the side of each of `faces` (true:
@@ -261,17 +269,19 @@ fn neck_cuts(mesh: &TriMesh, uv: &UvLayer, faces: &[u32], count: usize) -> Vec<(
         }
     }
     let length3 = |a: u32, b: u32| {
-        let (p, q) =
-            (mesh.positions[vertex[a as usize] as usize], mesh.positions[vertex[b as usize] as usize]);
-        (0..3).map(|k| (p[k] as f64 - q[k] as f64).powi(2)).sum::<f64>().sqrt()
+        let at = |v: u32| v3(mesh.positions[vertex[v as usize] as usize]);
+        norm(sub(at(a), at(b)))
     };
     let dist = |a: u32, b: u32| {
         let (p, q) = (pos[a as usize], pos[b as usize]);
         ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt()
     };
     // Undirected edges and their uses; directed boundary edges.
+    // Collapsed faces (two corners on one unknown: zero UV area) join nothing, as in
+    // `uv_charts`, and bound nothing.
+    let collapsed = |c: &[u32; 3]| c[0] == c[1] || c[1] == c[2] || c[0] == c[2];
     let mut uses: HashMap<(u32, u32), u32> = HashMap::new();
-    for c in &corners {
+    for c in corners.iter().filter(|c| !collapsed(c)) {
         for k in 0..3 {
             let (a, b) = (c[k], c[(k + 1) % 3]);
             *uses.entry((a.min(b), a.max(b))).or_default() += 1;
@@ -279,10 +289,7 @@ fn neck_cuts(mesh: &TriMesh, uv: &UvLayer, faces: &[u32], count: usize) -> Vec<(
     }
     let mut next: Vec<Option<u32>> = vec![None; n];
     let mut on_boundary = vec![false; n];
-    for c in &corners {
-        if c[0] == c[1] || c[1] == c[2] || c[0] == c[2] {
-            continue;
-        }
+    for c in corners.iter().filter(|c| !collapsed(c)) {
         for k in 0..3 {
             let (a, b) = (c[k], c[(k + 1) % 3]);
             if uses[&(a.min(b), a.max(b))] == 1 {
@@ -370,7 +377,7 @@ fn neck_cuts(mesh: &TriMesh, uv: &UvLayer, faces: &[u32], count: usize) -> Vec<(
             adj[b as usize].push((a, dist(a, b)));
         }
     }
-    let total: f64 = faces.iter().map(|&f| 0.5 * area2(tri(uv, f)).abs()).sum();
+    let total = uv_area(uv, faces);
     let mut taken: Vec<(usize, usize)> = Vec::new();
     let mut cuts = Vec::new();
     for &(_, a, b) in &pairs {
@@ -396,8 +403,8 @@ fn neck_cuts(mesh: &TriMesh, uv: &UvLayer, faces: &[u32], count: usize) -> Vec<(
             v = p;
         }
         let Some(side) = two_parts(&corners, &cut_edges) else { continue };
-        let moved: f64 =
-            faces.iter().zip(&side).filter(|(_, s)| **s).map(|(&f, _)| 0.5 * area2(tri(uv, f)).abs()).sum();
+        let moved_faces: Vec<u32> = faces.iter().zip(&side).filter(|(_, s)| **s).map(|(&f, _)| f).collect();
+        let moved = uv_area(uv, &moved_faces);
         if moved < MIN_PART_SHARE * total || total - moved < MIN_PART_SHARE * total {
             continue;
         }
@@ -416,7 +423,7 @@ fn two_parts(corners: &[[u32; 3]], cut: &HashSet<(u32, u32)>) -> Option<Vec<bool
         for k in 0..3 {
             let (a, b) = (c[k], c[(k + 1) % 3]);
             let e = (a.min(b), a.max(b));
-            if cut.contains(&e) {
+            if a == b || cut.contains(&e) {
                 continue;
             }
             match first.get(&e) {
@@ -493,6 +500,10 @@ mod tests {
         TriMesh { positions, uv: Some(UvLayer { coords, triangles: triangles.clone() }), triangles }
     }
 
+    fn tri(uv: &UvLayer, f: u32) -> [[f32; 2]; 3] {
+        uv.triangles[f as usize].map(|i| uv.coords[i as usize])
+    }
+
     /// Each face's UV triangle is the input's moved by a translation only.
     fn translated_only(before: &TriMesh, after: &TriMesh) -> bool {
         let (a, b) = (before.uv.as_ref().unwrap(), after.uv.as_ref().unwrap());
@@ -556,6 +567,7 @@ mod tests {
         let strip = shape(32, 4, 8.0, 1.0, |_, _| true);
         let opts = NeckOptions { seam_cost: 1e3, ..Default::default() };
         let out = cut_necks(&strip, &opts).unwrap();
+        assert!(out.report.trials >= 1, "a candidate was tried and refused for its seam");
         assert_eq!((out.report.cuts, out.report.efficiency_after), (0, out.report.efficiency_before));
         assert_eq!(out.mesh, strip);
     }

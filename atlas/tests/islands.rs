@@ -530,6 +530,11 @@ fn shapes_interlock_where_rectangles_cannot() {
     let out = pack(&m, opts(1024, 0, true));
     let rect_bound = 6.0 / 16.0;
     assert!(out.efficiency > 1.5 * rect_bound, "efficiency {} vs rectangles' {rect_bound}", out.efficiency);
+    // One attempt at that scale fits by shapes (rectangles need 4 units of side, so fit only at
+    // 3/4 of it), and nothing fits at a scale whose faces alone would overfill the square.
+    let o = opts(1024, 0, true);
+    assert!(packs_at_scale(&m, &o, out.scale).unwrap());
+    assert!(!packs_at_scale(&m, &o, 1.01 / 6f64.sqrt()).unwrap());
 }
 
 /// Repacks the atlases named in `$NUVO_REPACK_OBJ` (paths separated by `:`, e.g. the `atlas.obj`

@@ -169,7 +169,7 @@ fn print_report(report: &OutputReport, seconds: f64) {
             b.reassigned_faces,
             b.absorbed_faces
         );
-        if let Some(n) = &m.layout.necks {
+        if let Some(n) = m.layout.necks.as_ref().filter(|n| !n.skipped) {
             println!(
                 "       islands cut at their necks: {} (packing efficiency at 512²: {:.3} -> {:.3}; {} trials)",
                 n.cuts, n.efficiency_before, n.efficiency_after, n.trials
