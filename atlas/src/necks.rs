@@ -164,8 +164,8 @@ pub fn cut_necks(mesh: &TriMesh, opts: &NeckOptions) -> Result<Necked, AtlasErro
     let size = areas.iter().sum::<f64>().sqrt();
     let mut failures = 0;
     // Every packing attempt costs about the same per face (the islands' turns and shapes).
-    let faces = mesh.triangles.len().max(1);
-    let affordable = |r: &NeckReport| (r.trials + r.probes) * faces < opts.max_face_attempts;
+    let face_count = mesh.triangles.len().max(1);
+    let affordable = |r: &NeckReport| (r.trials + r.probes) * face_count < opts.max_face_attempts;
     while report.trials < opts.max_trials
         && failures < opts.max_failures
         && scale > 0.0
