@@ -504,7 +504,7 @@ fn compose(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
 }
 
 /// `p` rotated by the angle whose `(cos, sin)` is `rot`.
-fn rotated(p: [f64; 2], rot: [f64; 2]) -> [f64; 2] {
+pub(crate) fn rotated(p: [f64; 2], rot: [f64; 2]) -> [f64; 2] {
     [rot[0] * p[0] - rot[1] * p[1], rot[1] * p[0] + rot[0] * p[1]]
 }
 

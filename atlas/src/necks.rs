@@ -62,11 +62,11 @@ use serde::Serialize;
 use crate::error::AtlasError;
 use crate::injective::shortest_paths;
 use crate::islands::{
-    IslandPacking, SHAPES_UP_TO, convex_hull, min_area_rotation, pack_islands, packs_at_scale,
+    IslandPacking, SHAPES_UP_TO, convex_hull, min_area_rotation, pack_islands, packs_at_scale, rotated,
 };
 use crate::partuv::face_areas_3d;
 use crate::refine::island_unknowns;
-use crate::uvstats::{Dsu, face_uv_area2, require_uv, uv_charts, uv_islands};
+use crate::uvstats::{Dsu, face_uv_area2, faces_by_edge, require_uv, uv_charts, uv_islands};
 use crate::vecmath::{norm, sub, v3};
 
 /// Boundary vertices sampled per island for neck candidates.
@@ -238,8 +238,8 @@ fn waste(uv: &UvLayer, areas: &[f64], faces: &[u32]) -> f64 {
     let hull = convex_hull(&points);
     let rot = min_area_rotation(&hull);
     let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-    for p in &hull {
-        let q = [rot[0] * p[0] - rot[1] * p[1], rot[1] * p[0] + rot[0] * p[1]];
+    for &p in &hull {
+        let q = rotated(p, rot);
         for k in 0..2 {
             lo[k] = lo[k].min(q[k]);
             hi[k] = hi[k].max(q[k]);
@@ -276,23 +276,18 @@ fn neck_cuts(mesh: &TriMesh, uv: &UvLayer, faces: &[u32], count: usize) -> Vec<(
         let (p, q) = (pos[a as usize], pos[b as usize]);
         ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt()
     };
-    // Undirected edges and their uses; directed boundary edges.
-    // Collapsed faces (two corners on one unknown: zero UV area) join nothing, as in
-    // `uv_charts`, and bound nothing.
+    // The faces on each edge; directed boundary edges. Collapsed faces (two corners on one
+    // unknown: zero UV area) bound nothing; they still join their neighbours across their
+    // edges between two unknowns, as in `uv_charts`.
     let collapsed = |c: &[u32; 3]| c[0] == c[1] || c[1] == c[2] || c[0] == c[2];
-    let mut uses: HashMap<(u32, u32), u32> = HashMap::new();
-    for c in corners.iter().filter(|c| !collapsed(c)) {
-        for k in 0..3 {
-            let (a, b) = (c[k], c[(k + 1) % 3]);
-            *uses.entry((a.min(b), a.max(b))).or_default() += 1;
-        }
-    }
+    let by_edge = faces_by_edge(corners.iter().enumerate().map(|(t, &c)| (t as u32, c)));
+    let uses = |e: &(u32, u32)| by_edge[e].iter().filter(|&&t| !collapsed(&corners[t as usize])).count();
     let mut next: Vec<Option<u32>> = vec![None; n];
     let mut on_boundary = vec![false; n];
     for c in corners.iter().filter(|c| !collapsed(c)) {
         for k in 0..3 {
             let (a, b) = (c[k], c[(k + 1) % 3]);
-            if uses[&(a.min(b), a.max(b))] == 1 {
+            if uses(&(a.min(b), a.max(b))) == 1 {
                 if next[a as usize].is_some() {
                     return Vec::new(); // two boundary edges leave one vertex: not simple loops
                 }
@@ -369,7 +364,7 @@ fn neck_cuts(mesh: &TriMesh, uv: &UvLayer, faces: &[u32], count: usize) -> Vec<(
     };
     // Vertex adjacency with UV lengths, for the paths.
     let mut adj: Vec<Vec<(u32, f64)>> = vec![Vec::new(); n];
-    let mut edges: Vec<&(u32, u32)> = uses.keys().collect();
+    let mut edges: Vec<&(u32, u32)> = by_edge.keys().filter(|e| uses(e) > 0).collect();
     edges.sort();
     for &&(a, b) in &edges {
         if a != b {
@@ -402,7 +397,7 @@ fn neck_cuts(mesh: &TriMesh, uv: &UvLayer, faces: &[u32], count: usize) -> Vec<(
             seam += length3(p, v);
             v = p;
         }
-        let Some(side) = two_parts(&corners, &cut_edges) else { continue };
+        let Some(side) = two_parts(corners.len(), &by_edge, &cut_edges) else { continue };
         let moved_faces: Vec<u32> = faces.iter().zip(&side).filter(|(_, s)| **s).map(|(&f, _)| f).collect();
         let moved = uv_area(uv, &moved_faces);
         if moved < MIN_PART_SHARE * total || total - moved < MIN_PART_SHARE * total {
@@ -414,31 +409,27 @@ fn neck_cuts(mesh: &TriMesh, uv: &UvLayer, faces: &[u32], count: usize) -> Vec<(
     cuts
 }
 
-/// The island's faces joined across the edges they share except `cut`: for exactly two parts,
-/// whether each face is in the part without the first face.
-fn two_parts(corners: &[[u32; 3]], cut: &HashSet<(u32, u32)>) -> Option<Vec<bool>> {
-    let mut first: HashMap<(u32, u32), u32> = HashMap::new();
-    let mut dsu = Dsu::new(corners.len());
-    for (t, c) in corners.iter().enumerate() {
-        for k in 0..3 {
-            let (a, b) = (c[k], c[(k + 1) % 3]);
-            let e = (a.min(b), a.max(b));
-            if a == b || cut.contains(&e) {
-                continue;
-            }
-            match first.get(&e) {
-                Some(&o) => dsu.union(o, t as u32),
-                None => {
-                    first.insert(e, t as u32);
-                }
+/// The island's `count` faces joined across the edges they share (`by_edge`) except `cut` and
+/// edges from an unknown to itself: for exactly two parts, whether each face is in the part
+/// without the first face.
+fn two_parts(
+    count: usize,
+    by_edge: &HashMap<(u32, u32), Vec<u32>>,
+    cut: &HashSet<(u32, u32)>,
+) -> Option<Vec<bool>> {
+    let mut dsu = Dsu::new(count);
+    for (&(a, b), faces) in by_edge {
+        if a != b && !cut.contains(&(a, b)) {
+            for w in faces.windows(2) {
+                dsu.union(w[0], w[1]);
             }
         }
     }
     let root = dsu.find(0);
-    let side: Vec<bool> = (0..corners.len() as u32).map(|t| dsu.find(t) != root).collect();
+    let side: Vec<bool> = (0..count as u32).map(|t| dsu.find(t) != root).collect();
     let other = side.iter().position(|&s| s)?;
     let other_root = dsu.find(other as u32);
-    (0..corners.len() as u32).all(|t| dsu.find(t) == root || dsu.find(t) == other_root).then_some(side)
+    (0..count as u32).all(|t| dsu.find(t) == root || dsu.find(t) == other_root).then_some(side)
 }
 
 /// `mesh` with the faces of `faces` on the moved `side` given their own texture coordinates,

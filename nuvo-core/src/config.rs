@@ -289,7 +289,7 @@ pub struct OutputConfig {
     /// that waste most of their bounding rectangle and kept only when a trial packing gains in
     /// proportion to the seam's length; with `injective`, SLIM then relaxes the parts from their
     /// maps. Off by default, on in `nuvo unwrap` (Common Shapes: packing efficiency 0.51 -> 0.60,
-    /// Editability 0.9568 -> 0.9557, BENCHMARKS.md "Cutting islands at their necks").
+    /// Editability 0.9568 -> 0.9562, BENCHMARKS.md "Cutting islands at their necks").
     pub cut_necks: bool,
     /// How the atlas is laid out: `"squares"` (default, the paper's: one square cell per chart) or
     /// `"islands"` (not in the paper; `nuvo_atlas::islands`: every UV island packed on its own at
