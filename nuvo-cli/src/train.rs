@@ -60,7 +60,13 @@ pub fn train(args: &TrainArgs) -> anyhow::Result<()> {
         summary.seconds,
         summary.skipped,
         summary.rollbacks,
-        if summary.stopped_by_budget { ", stopped by the time budget" } else { "" },
+        if summary.stopped_by_budget {
+            ", stopped by the time budget"
+        } else if summary.settled {
+            ", stopped once the atlas had settled"
+        } else {
+            ""
+        },
         out_dir.display()
     );
     if args.no_bake || !loaded.config.output.bake {
@@ -169,6 +175,8 @@ fn print_report(report: &OutputReport, seconds: f64) {
             b.reassigned_faces,
             b.absorbed_faces
         );
+        let phases: Vec<String> = report.phase_seconds.iter().map(|(p, s)| format!("{p} {s:.1}")).collect();
+        println!("       seconds per phase: {}", phases.join(", "));
         if let Some(n) = m.layout.necks.as_ref().filter(|n| !n.skipped) {
             println!(
                 "       islands cut at their necks: {} (packing efficiency at 512²: {:.3} -> {:.3}; {} trials)",

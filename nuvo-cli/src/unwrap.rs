@@ -64,6 +64,14 @@ struct UnwrapReport<'a> {
     decisions: &'a [Decision],
     steps: u64,
     seconds: Timings,
+    /// Wall seconds of each phase of the bake, in order (`nuvo_core::outputs::PhaseSeconds`).
+    bake_phases: Vec<Phase>,
+}
+
+#[derive(Serialize)]
+struct Phase {
+    phase: &'static str,
+    seconds: f64,
 }
 
 #[derive(Clone, Copy, Default, Serialize)]
@@ -217,7 +225,8 @@ pub fn run_unwrap(args: &UnwrapArgs) -> anyhow::Result<()> {
     let mut progress = Progress::new(trainer.total_steps());
     let summary = run(&mut trainer, &RunOptions { out_dir: out.clone(), resume: false }, &mut progress)?;
     progress.finish();
-    println!("trained {} steps in {:.1} s", summary.steps, summary.seconds);
+    let why = if summary.settled { " (the atlas had settled)" } else { "" };
+    println!("trained {} steps in {:.1} s{why}", summary.steps, summary.seconds);
     let t = Instant::now();
     let report = bake_into_report(&mut trainer, &out, &loaded)?;
     if is_gltf(&input)
@@ -245,6 +254,7 @@ pub fn run_unwrap(args: &UnwrapArgs) -> anyhow::Result<()> {
         decisions: &decisions,
         steps: summary.steps,
         seconds,
+        bake_phases: report.phase_seconds.iter().map(|&(phase, seconds)| Phase { phase, seconds }).collect(),
     })
     .context("cannot encode unwrap.json")?;
     let path = out.join("unwrap.json");

@@ -37,6 +37,8 @@ pub struct Checkpoint {
     pub params: Vec<(String, Tensor)>,
     /// Adam's step count and its first and second moments, one vector per parameter.
     pub adam: (u64, Vec<Vec<f32>>, Vec<Vec<f32>>),
+    /// Looks in a row at which the atlas had settled (`training.stop_when_settled`; 0 without it).
+    pub settled_looks: u32,
 }
 
 /// A checkpoint that could not be written or read.
@@ -62,6 +64,13 @@ struct Meta {
     lr_scale: f32,
     config: String,
     to_canonical: Similarity,
+    /// Absent when 0, so runs without `stop_when_settled` write the bytes they always did.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    settled_looks: u32,
+}
+
+fn is_zero(n: &u32) -> bool {
+    *n == 0
 }
 
 /// The metadata key.
@@ -100,6 +109,7 @@ impl Checkpoint {
             lr_scale: self.lr_scale,
             config: self.config_toml.clone(),
             to_canonical: self.to_canonical,
+            settled_looks: self.settled_looks,
         };
         let json = serde_json::to_string(&meta).map_err(|e| invalid(e.to_string()))?;
         let metadata = HashMap::from([(META_KEY.to_owned(), json)]);
@@ -158,6 +168,7 @@ impl Checkpoint {
             to_canonical: meta.to_canonical,
             params,
             adam: (meta.adam_steps, m, v),
+            settled_looks: meta.settled_looks,
         })
     }
 }
@@ -177,6 +188,7 @@ mod tests {
                 ("b".into(), Tensor::scalar(7.0)),
             ],
             adam: (41, vec![vec![0.1, 0.2, 0.3, 0.4], vec![0.5]], vec![vec![1.0, 2.0, 3.0, 4.0], vec![5.0]]),
+            settled_looks: 1,
         }
     }
 

@@ -150,6 +150,14 @@ pub struct TrainingConfig {
     /// Stop early after this many minutes of training (results then depend on the machine's speed).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub time_budget_minutes: Option<f64>,
+    /// Stop once the atlas has settled: when, at two looks in a row 25 steps apart after the warm
+    /// start, at most this share of a fixed sample of surface points changed chart
+    /// (`crate::settling`). The atlas a bake makes changes little after that (the layout passes
+    /// redo the distortion within each chart), while training on would mostly merge the last
+    /// small charts. `steps` stays the most a run takes. Runs of one chart ignore it (nothing to
+    /// assign). Not in the paper.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stop_when_settled: Option<f32>,
     /// Finite-difference step of the distortion losses, in the model frame (the paper: 1e-2).
     pub epsilon: f32,
     /// Write a checkpoint every this many steps (and at the end).
@@ -167,6 +175,7 @@ impl Default for TrainingConfig {
             batch_distortion: None,
             chart_support: 0.0,
             time_budget_minutes: None,
+            stop_when_settled: None,
             epsilon: 1e-2,
             checkpoint_every: 250,
             max_bad_steps: 20,
@@ -679,6 +688,9 @@ impl ExperimentConfig {
         if t.time_budget_minutes.is_some_and(|b| !(b.is_finite() && b > 0.0)) {
             return Err(src.invalid("training.time_budget_minutes", "must be a positive number of minutes"));
         }
+        if t.stop_when_settled.is_some_and(|s| !(s.is_finite() && (0.0..1.0).contains(&s))) {
+            return Err(src.invalid("training.stop_when_settled", "must be a share of points in [0, 1)"));
+        }
         if t.checkpoint_every == 0 {
             return Err(src.invalid("training.checkpoint_every", "must be at least 1"));
         }
@@ -819,6 +831,14 @@ mod tests {
             assert!(e.contains("training.chart_support") && e.contains("below 1"), "{bad}: {e}");
         }
         assert!(from_str("c.toml", &format!("{MINIMAL}[training]\nchart_support = 1e-4\n")).is_ok());
+        for bad in ["1.0", "-0.01", "nan"] {
+            let e = from_str("c.toml", &format!("{MINIMAL}[training]\nstop_when_settled = {bad}\n"))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("training.stop_when_settled") && e.contains("[0, 1)"), "{bad}: {e}");
+        }
+        let c = from_str("c.toml", &format!("{MINIMAL}[training]\nstop_when_settled = 0.015\n")).unwrap();
+        assert_eq!(c.config.training.stop_when_settled, Some(0.015));
     }
 
     #[test]

@@ -19,6 +19,7 @@ pub mod model;
 pub mod outputs;
 pub mod run;
 pub mod seeds;
+pub mod settling;
 pub mod trainer;
 pub mod unwrap;
 pub mod warm_start;

@@ -122,7 +122,11 @@ pub struct LayoutSummary {
 }
 
 /// Refines and packs the baked layout as `opts` asks (both off: the bake as it is).
-fn finish_layout(mesh: TriMesh, opts: &OutputConfig) -> Result<(TriMesh, LayoutSummary), OutputError> {
+fn finish_layout(
+    mesh: TriMesh,
+    opts: &OutputConfig,
+    phases: &mut Phases,
+) -> Result<(TriMesh, LayoutSummary), OutputError> {
     let mut mesh = mesh;
     let mut summary = LayoutSummary {
         packing: opts.packing,
@@ -136,16 +140,19 @@ fn finish_layout(mesh: TriMesh, opts: &OutputConfig) -> Result<(TriMesh, LayoutS
         let refined = refine_islands(&mesh, &RefineOptions::default())?;
         mesh = refined.mesh;
         summary.refine = Some(refined.report);
+        phases.done("refine");
     }
     if opts.injective {
         let injective = make_injective(&mesh, &injective_options(opts))?;
         mesh = injective.mesh;
         summary.injective = Some(injective.report);
+        phases.done("injective");
     }
     if opts.join {
         let joined = join_small_islands(&mesh, &JoinOptions::default())?;
         mesh = joined.mesh;
         summary.join = Some(joined.report);
+        phases.done("join");
     }
     if opts.packing == Packing::Islands && opts.cut_necks {
         let necked = cut_necks(&mesh, &NeckOptions::default())?;
@@ -156,12 +163,14 @@ fn finish_layout(mesh: TriMesh, opts: &OutputConfig) -> Result<(TriMesh, LayoutS
             mesh = make_injective(&mesh, &injective_options(opts))?.mesh;
         }
         summary.necks = Some(necked.report);
+        phases.done("necks");
     }
     if opts.packing == Packing::Islands {
         let packing = IslandPacking { resolution: opts.atlas_resolution, gutter: opts.gutter, rotate: true };
         let packed = pack_islands(&mesh, &packing)?;
         mesh = packed.mesh;
         summary.islands = Some(packed.islands);
+        phases.done("pack");
     }
     Ok((mesh, summary))
 }
@@ -186,10 +195,36 @@ pub struct OutputMetrics {
     pub steps: u64,
 }
 
+/// Wall seconds of each phase of a bake, in the order they ran (`evaluate`, `bake`, `refine`, ...).
+/// Kept out of `metrics.json`, which stays the same bytes for the same atlas; `nuvo unwrap` writes
+/// them to `unwrap.json` and the CLI prints them.
+pub type PhaseSeconds = Vec<(&'static str, f64)>;
+
+/// Records [`PhaseSeconds`]: each call to [`Phases::done`] closes the phase that began at the
+/// previous call.
+struct Phases {
+    last: std::time::Instant,
+    seconds: PhaseSeconds,
+}
+
+impl Phases {
+    fn start() -> Self {
+        Phases { last: std::time::Instant::now(), seconds: Vec::new() }
+    }
+
+    fn done(&mut self, phase: &'static str) {
+        let now = std::time::Instant::now();
+        self.seconds.push((phase, (now - self.last).as_secs_f64()));
+        self.last = now;
+    }
+}
+
 /// What was written.
 #[derive(Clone, Debug)]
 pub struct OutputReport {
     pub files: Vec<PathBuf>,
+    /// How long each phase took.
+    pub phase_seconds: PhaseSeconds,
     /// The baked UVs, per corner of the mesh baked onto (`None` without a mesh).
     pub baked_uv: Option<nuvo_geometry::UvLayer>,
     /// `None` when there was no mesh to bake onto (per-point UVs were written instead).
@@ -236,9 +271,11 @@ fn bake_and_measure(
     dir: &Path,
     opts: &OutputConfig,
 ) -> Result<OutputReport, OutputError> {
+    let mut phases = Phases::start();
     let n = trainer.model().charts();
     let frame = trainer.source().to_canonical();
     let fields = trainer.evaluate_atlas(&mesh.positions);
+    phases.done("evaluate");
     let layout = AtlasLayout::grid(n, opts.atlas_resolution, opts.gutter)?;
     let round_trip = (opts.round_trip_tolerance > 0.0)
         .then(|| RoundTrip { distances: &fields.round_trip, tolerance: opts.round_trip_tolerance });
@@ -250,7 +287,8 @@ fn bake_and_measure(
         &layout,
         &options,
     )?;
-    let (layout_mesh, finished) = finish_layout(baked.mesh, opts)?;
+    phases.done("bake");
+    let (layout_mesh, finished) = finish_layout(baked.mesh, opts, &mut phases)?;
     let baked = nuvo_atlas::bake::Baked { mesh: layout_mesh, ..baked };
     // Refinement and packing move UVs: count flips and overlaps again on what is written.
     let recount = (finished.refine.is_some()
@@ -259,6 +297,7 @@ fn bake_and_measure(
         || finished.islands.is_some())
     .then(|| analyse_uv(&baked.mesh, Some(&baked.face_chart), opts.atlas_resolution))
     .transpose()?;
+    phases.done("recount");
     let mut files = Vec::new();
     let path = |name: &str| dir.join(name);
 
@@ -293,6 +332,7 @@ fn bake_and_measure(
     nuvo_geometry::fsio::write_bytes_atomic(&path(names::VERTEX_MAP), map.as_bytes())
         .map_err(io_err(&path(names::VERTEX_MAP)))?;
     files.push(path(names::VERTEX_MAP));
+    phases.done("export");
     write_png(
         &path(names::LAYOUT),
         &uv_layout(&baked.mesh, Some(&baked.face_chart), opts.atlas_resolution.min(2048))?,
@@ -300,6 +340,7 @@ fn bake_and_measure(
     files.push(path(names::LAYOUT));
     files.extend(write_renders(&baked.mesh, &checker, dir, opts)?);
     files.push(write_normal_grids(trainer, &layout, dir)?);
+    phases.done("pictures");
 
     let eval =
         EvalOptions { views: opts.eval_views, resolution: opts.eval_resolution, ..EvalOptions::default() };
@@ -315,7 +356,8 @@ fn bake_and_measure(
     nuvo_geometry::fsio::write_bytes_atomic(&path(names::METRICS), json.as_bytes())
         .map_err(io_err(&path(names::METRICS)))?;
     files.push(path(names::METRICS));
-    Ok(OutputReport { files, baked_uv: baked.mesh.uv, metrics: Some(summary) })
+    phases.done("metrics");
+    Ok(OutputReport { files, phase_seconds: phases.seconds, baked_uv: baked.mesh.uv, metrics: Some(summary) })
 }
 
 /// The bake's counts; flips, overlaps and degenerate faces from `recount` when refinement or
@@ -398,6 +440,7 @@ fn write_point_uvs(
     opts: &OutputConfig,
 ) -> Result<OutputReport, OutputError> {
     const POINTS: usize = 200_000;
+    let mut phases = Phases::start();
     let n = trainer.model().charts();
     let frame = trainer.source().to_canonical();
     let pts = trainer.source().sample(POINTS, trainer.config().seed).positions;
@@ -413,5 +456,6 @@ fn write_point_uvs(
     }
     let path = dir.join(names::POINTS);
     nuvo_geometry::fsio::write_bytes_atomic(&path, csv.as_bytes()).map_err(io_err(&path))?;
-    Ok(OutputReport { files: vec![path], baked_uv: None, metrics: None })
+    phases.done("points");
+    Ok(OutputReport { files: vec![path], phase_seconds: phases.seconds, baked_uv: None, metrics: None })
 }

@@ -1,10 +1,10 @@
 //! A training run on disk: the output folder, the step loop, checkpoints, the log, resume, the time
-//! budget and NaN rollback.
+//! budget, stopping once the atlas has settled, and NaN rollback.
 //!
 //! Files in the output folder (fixed names scripts can rely on):
 //! - `config.toml`: the resolved config (defaults filled in), written before the first step;
 //! - `log.jsonl`: one JSON object per step (`step`, `total`, `terms`, `lr_factor`, `sigma`,
-//!   `seconds`, `skipped`); `seconds` is the wall time of training up to that step since the run
+//!   `seconds`, `skipped`, and `moved` at the settling probe's looks); `seconds` is the wall time of training up to that step since the run
 //!   began, summed over resumed sessions (the steps a killed session ran after its last checkpoint
 //!   are redone and counted once);
 //! - `checkpoint.safetensors`: parameters and optimiser state, every `checkpoint_every` steps and at
@@ -64,6 +64,8 @@ pub struct RunSummary {
     pub seconds: f64,
     /// Whether the time budget stopped the run before `steps`.
     pub stopped_by_budget: bool,
+    /// Whether the run stopped because the atlas had settled (`training.stop_when_settled`).
+    pub settled: bool,
     /// The last step's outcome.
     pub last: Option<StepOutcome>,
 }
@@ -97,13 +99,25 @@ pub fn run(
     let every = trainer.config().training.checkpoint_every;
     let max_bad = trainer.config().training.max_bad_steps;
     let mut snapshot = trainer.checkpoint();
-    let mut summary =
-        RunSummary { steps: 0, skipped: 0, rollbacks: 0, seconds: 0.0, stopped_by_budget: false, last: None };
+    let mut summary = RunSummary {
+        steps: 0,
+        skipped: 0,
+        rollbacks: 0,
+        seconds: 0.0,
+        stopped_by_budget: false,
+        settled: false,
+        last: None,
+    };
     let mut consecutive_bad = 0u32;
     while trainer.step_index() < trainer.total_steps() {
         if budget.is_some_and(|b| start.elapsed().as_secs_f64() >= b) {
             summary.stopped_by_budget = true;
             observer.note(&format!("time budget reached after step {}", trainer.step_index()));
+            break;
+        }
+        if trainer.settled() {
+            summary.settled = true;
+            observer.note(&format!("the atlas settled after step {}", trainer.step_index()));
             break;
         }
         let outcome = trainer.step()?;
@@ -242,7 +256,7 @@ pub fn logged_seconds(log: &str) -> f64 {
 fn write_log_line(log: &mut impl Write, o: &StepOutcome, seconds: f64) -> std::io::Result<()> {
     let terms: serde_json::Map<String, serde_json::Value> =
         o.terms.iter().map(|(k, v)| (k.clone(), serde_json::json!(v))).collect();
-    let line = serde_json::json!({
+    let mut line = serde_json::json!({
         "step": o.step,
         "total": o.total,
         "terms": terms,
@@ -251,6 +265,9 @@ fn write_log_line(log: &mut impl Write, o: &StepOutcome, seconds: f64) -> std::i
         "seconds": seconds,
         "skipped": o.skipped,
     });
+    if let Some(m) = o.moved {
+        line["moved"] = serde_json::json!(m);
+    }
     writeln!(log, "{line}")
 }
 

@@ -17,6 +17,8 @@ pub enum Stream {
     Init = 4,
     /// The warm-start prior's one-off sample of the scene (step is ignored).
     WarmStart = 5,
+    /// The settling probe's points (`crate::settling`; step is ignored).
+    Probe = 6,
 }
 
 fn splitmix64(mut z: u64) -> u64 {

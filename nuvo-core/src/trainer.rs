@@ -17,6 +17,7 @@ use crate::checkpoint::{Checkpoint, CheckpointError};
 use crate::config::{ConfigError, ExperimentConfig, LoadedConfig};
 use crate::model::{MODEL_FRAME_SCALE, NuvoModel, groups};
 use crate::seeds::{Stream, derive};
+use crate::settling::{Movement, Snapshot, movement};
 use crate::warm_start::{ProjectionPrior, WarmStartConfig};
 
 /// Anything that stops training.
@@ -88,6 +89,9 @@ pub struct StepOutcome {
     pub sigma: f32,
     /// Why the step was skipped, if it was.
     pub skipped: Option<String>,
+    /// How much the atlas moved since the settling probe's last look, when it looked after this
+    /// step (`training.stop_when_settled`).
+    pub moved: Option<Movement>,
 }
 
 /// The trained networks evaluated at `V` points (`n` charts, row-major), what baking needs.
@@ -116,7 +120,19 @@ pub struct Trainer {
     batch: StepBatch,
     /// The projection prior and its schedule, when `[warm_start]` is enabled.
     warm_start: Option<(ProjectionPrior, WarmStartConfig)>,
+    /// The settling probe's points (drawn on first use).
+    probe_points: Vec<[f32; 3]>,
+    /// The probe's last look (`training.stop_when_settled`).
+    last_look: Option<Snapshot>,
+    /// Looks in a row at which the atlas had settled.
+    settled_looks: u32,
 }
+
+/// Steps between two looks of the settling probe; `checkpoint_every` being a multiple of it (the
+/// default 250 is) lets a resumed run stop at the same step as an uninterrupted one.
+pub const LOOK_EVERY: u64 = 25;
+/// Settled looks in a row that stop a run (one alone can be a lull).
+const SETTLED_LOOKS: u32 = 2;
 
 /// The name the warm-start prior's value is logged under.
 pub const WARM_START_TERM: &str = "warm_start";
@@ -170,6 +186,9 @@ impl Trainer {
             lr_scale: 1.0,
             batch: StepBatch::default(),
             warm_start,
+            probe_points: Vec::new(),
+            last_look: None,
+            settled_looks: 0,
         })
     }
 
@@ -250,6 +269,7 @@ impl Trainer {
             lr_factor,
             sigma: f32::NAN,
             skipped: None,
+            moved: None,
         };
         let total = self.record(None, &mut outcome.terms)?;
         outcome.total = self.tape.scalar(total);
@@ -266,7 +286,39 @@ impl Trainer {
         }
         outcome.sigma = self.tape.params().value(self.model.sigma_param()).data()[0];
         self.step += 1;
+        outcome.moved = self.look_if_due();
         Ok(outcome)
+    }
+
+    /// With `training.stop_when_settled`, every [`LOOK_EVERY`] steps: what the networks say at the
+    /// probe points, how much that moved since the last look, and whether it counts as settled
+    /// (only once the warm-start prior has faded: until then it holds the charts in place).
+    fn look_if_due(&mut self) -> Option<Movement> {
+        let threshold = self.settling_threshold()?;
+        if !self.step.is_multiple_of(LOOK_EVERY) {
+            return None;
+        }
+        let now = self.probe();
+        let moved = self.last_look.as_ref().map(|before| movement(before, &now));
+        self.last_look = Some(now);
+        let prior_faded = self.warm_start.as_ref().is_none_or(|(_, cfg)| self.step >= cfg.steps);
+        match moved {
+            Some(m) if prior_faded && m.charts_changed <= threshold => self.settled_looks += 1,
+            _ => self.settled_looks = 0,
+        }
+        moved
+    }
+
+    /// `training.stop_when_settled`, when it applies: one chart has no assignment to settle (its
+    /// map alone keeps improving: a relief's single chart packed at 0.40 instead of 0.60 when
+    /// stopped at the same point as the others, BENCHMARKS.md).
+    fn settling_threshold(&self) -> Option<f32> {
+        self.config.training.stop_when_settled.filter(|_| self.model.charts() > 1)
+    }
+
+    /// Whether the atlas has settled (`training.stop_when_settled`): the run can stop.
+    pub fn settled(&self) -> bool {
+        self.settled_looks >= SETTLED_LOOKS
     }
 
     /// Records the weighted sum of the terms (or of term `only`) on a fresh tape; pushes each
@@ -354,6 +406,21 @@ impl Trainer {
         AtlasFields { probs, uvs, round_trip }
     }
 
+    /// What the networks say now at the settling probe's points (`crate::settling`): a fixed
+    /// sample of the surface, drawn on the first call from the run's seed.
+    pub fn probe(&mut self) -> Snapshot {
+        /// Enough points that a chart of 1% of the surface holds ~40 of them.
+        const PROBE_POINTS: usize = 4096;
+        if self.probe_points.is_empty() {
+            let seed = derive(self.config.seed, 0, Stream::Probe);
+            self.probe_points = self.source.sample(PROBE_POINTS, seed).positions;
+        }
+        let points = std::mem::take(&mut self.probe_points);
+        let fields = self.evaluate_atlas(&points);
+        self.probe_points = points;
+        Snapshot::from_fields(&fields.probs, &fields.uvs, self.model.charts())
+    }
+
     /// Clears the tape and records `canonical` points, scaled into the model frame, as its input.
     fn fresh_model_frame_input(&mut self, canonical: &[[f32; 3]]) -> Var {
         self.tape.reset();
@@ -380,6 +447,7 @@ impl Trainer {
             to_canonical: self.source.to_canonical(),
             params: p.ids().map(|id| (p.info(id).name.clone(), p.value(id).clone())).collect(),
             adam: (self.adam.steps(), m.to_vec(), v.to_vec()),
+            settled_looks: self.settled_looks,
         }
     }
 
@@ -416,6 +484,11 @@ impl Trainer {
         }
         self.step = ckpt.step;
         self.lr_scale = ckpt.lr_scale;
+        // The look the run took at this step, taken again (the same parameters give the same
+        // look); between looks the next comparison has no predecessor and cannot count.
+        self.settled_looks = ckpt.settled_looks;
+        self.last_look = (self.settling_threshold().is_some() && self.step.is_multiple_of(LOOK_EVERY))
+            .then(|| self.probe());
         Ok(())
     }
 }

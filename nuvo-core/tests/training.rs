@@ -461,3 +461,95 @@ fn warm_start_mistakes_are_located() {
         assert!(err.contains(key), "{err}");
     }
 }
+
+/// `SMALL` run long enough to settle: 400 steps at most, a look every 25, checkpoints every 50.
+fn settling(threshold: f32) -> LoadedConfig {
+    let mut cfg = small("");
+    cfg.config.training.steps = 400;
+    cfg.config.training.checkpoint_every = 50;
+    cfg.config.training.stop_when_settled = Some(threshold);
+    cfg
+}
+
+fn logged_steps(dir: &std::path::Path) -> Vec<serde_json::Value> {
+    std::fs::read_to_string(dir.join(files::LOG))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
+}
+
+#[test]
+fn a_settled_atlas_stops_the_run_at_the_second_calm_look() {
+    // Looks after steps 25, 50, 75: the first has nothing to compare with; at a threshold no
+    // movement exceeds, the second and third are calm, and the run stops after step 75.
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let summary =
+        run(&mut trainer(&settling(0.999)), &RunOptions { out_dir: out.clone(), resume: false }, &mut Silent)
+            .unwrap();
+    assert!(summary.settled && !summary.stopped_by_budget);
+    assert_eq!(summary.steps, 75);
+    let log = logged_steps(&out);
+    assert_eq!(log.len(), 75);
+    let looked: Vec<u64> =
+        log.iter().filter(|l| l.get("moved").is_some()).map(|l| l["step"].as_u64().unwrap()).collect();
+    assert_eq!(looked, vec![49, 74], "a look after every 25th step that has one before it");
+    let moved = &log[49]["moved"];
+    assert!(
+        moved["charts_changed"].as_f64().unwrap() <= 1.0 && moved["shape_change"].as_f64().unwrap() >= 0.0
+    );
+    // Never settled: a threshold of 0 while the charts still move runs to `steps` (stopped here by
+    // a small `steps` to keep the test short).
+    let mut never = settling(0.0);
+    never.config.training.steps = 100;
+    let summary = run(
+        &mut trainer(&never),
+        &RunOptions { out_dir: dir.path().join("never"), resume: false },
+        &mut Silent,
+    )
+    .unwrap();
+    assert!(!summary.settled);
+    assert_eq!(summary.steps, 100);
+    // One chart: no assignment to settle, the rule does not apply.
+    let mut one = settling(0.999);
+    one.config.training.steps = 100;
+    one.config.model.charts = 1;
+    let out = dir.path().join("one");
+    let summary =
+        run(&mut trainer(&one), &RunOptions { out_dir: out.clone(), resume: false }, &mut Silent).unwrap();
+    assert!(!summary.settled);
+    assert_eq!(summary.steps, 100);
+    assert!(logged_steps(&out).iter().all(|l| l.get("moved").is_none()), "no looks without the rule");
+}
+
+#[test]
+fn a_resumed_run_settles_where_an_uninterrupted_one_does() {
+    let cfg = settling(0.999);
+    let dir = tempfile::tempdir().unwrap();
+    let mut full = trainer(&cfg);
+    run(&mut full, &RunOptions { out_dir: dir.path().join("full"), resume: false }, &mut Silent).unwrap();
+    // "Killed" after 60 steps, with the checkpoint of step 50 (one calm look behind it).
+    let out = dir.path().join("killed");
+    std::fs::create_dir_all(&out).unwrap();
+    let mut partial = trainer(&cfg);
+    for s in 0..60 {
+        partial.step().unwrap();
+        if s + 1 == 50 {
+            let ckpt = partial.checkpoint();
+            assert_eq!(ckpt.settled_looks, 1);
+            ckpt.save(&out.join(files::CHECKPOINT)).unwrap();
+        }
+    }
+    std::fs::write(out.join(files::LOG), (0..60).map(|s| format!("{{\"step\":{s}}}\n")).collect::<String>())
+        .unwrap();
+    let mut resumed = trainer(&cfg);
+    let summary = run(&mut resumed, &RunOptions { out_dir: out.clone(), resume: true }, &mut Silent).unwrap();
+    assert!(summary.settled);
+    assert_eq!(summary.steps, 75);
+    assert_eq!(param_values(&resumed), param_values(&full));
+    assert_eq!(
+        Checkpoint::load(&out.join(files::CHECKPOINT)).unwrap(),
+        Checkpoint::load(&dir.path().join("full").join(files::CHECKPOINT)).unwrap()
+    );
+}
