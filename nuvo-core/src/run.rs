@@ -4,9 +4,10 @@
 //! Files in the output folder (fixed names scripts can rely on):
 //! - `config.toml`: the resolved config (defaults filled in), written before the first step;
 //! - `log.jsonl`: one JSON object per step (`step`, `total`, `terms`, `lr_factor`, `sigma`,
-//!   `seconds`, `skipped`, and `moved` at the settling probe's looks); `seconds` is the wall time of training up to that step since the run
-//!   began, summed over resumed sessions (the steps a killed session ran after its last checkpoint
-//!   are redone and counted once);
+//!   `seconds`, `skipped`, and `moved` at the settling probe's looks, `crate::settling`);
+//!   `seconds` is the wall time of training up to that step since the run began, summed over
+//!   resumed sessions (the steps a killed session ran after its last checkpoint are redone and
+//!   counted once);
 //! - `checkpoint.safetensors`: parameters and optimiser state, every `checkpoint_every` steps and at
 //!   the end, written atomically.
 //!

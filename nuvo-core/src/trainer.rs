@@ -485,10 +485,11 @@ impl Trainer {
         self.step = ckpt.step;
         self.lr_scale = ckpt.lr_scale;
         // The look the run took at this step, taken again (the same parameters give the same
-        // look); between looks the next comparison has no predecessor and cannot count.
+        // look); between looks, and at step 0 where a run has not looked yet, the next look has
+        // nothing to compare with and cannot count.
         self.settled_looks = ckpt.settled_looks;
-        self.last_look = (self.settling_threshold().is_some() && self.step.is_multiple_of(LOOK_EVERY))
-            .then(|| self.probe());
+        let looked_here = self.step > 0 && self.step.is_multiple_of(LOOK_EVERY);
+        self.last_look = (self.settling_threshold().is_some() && looked_here).then(|| self.probe());
         Ok(())
     }
 }
