@@ -84,7 +84,7 @@
 //! Islands are processed in parallel (rayon), each sequentially; the result does not depend on the
 //! thread count.
 
-use std::collections::HashMap;
+use foldhash::{HashMap, HashMapExt, HashSet, HashSetExt};
 
 use faer::linalg::solvers::Solve;
 use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
@@ -1091,7 +1091,7 @@ impl Patch {
     /// Cuts the edges of the path that `prev` leads along from `v` back to its source, then
     /// takes the topology again.
     fn cut_along(&mut self, prev: &[u32], mut v: u32) {
-        let mut cut = std::collections::HashSet::new();
+        let mut cut = HashSet::new();
         while prev[v as usize] != u32::MAX {
             let u = prev[v as usize];
             cut.insert((u.min(v), u.max(v)));
@@ -1370,7 +1370,7 @@ fn separate_fans(
     mut corners: Vec<[u32; 3]>,
     collapsed: &[bool],
     n: usize,
-    cut: &std::collections::HashSet<(u32, u32)>,
+    cut: &HashSet<(u32, u32)>,
 ) -> (Vec<[u32; 3]>, usize) {
     let mut uses: HashMap<(u32, u32), Vec<(u32, usize)>> = HashMap::with_capacity(3 * corners.len());
     for (t, c) in corners.iter().enumerate() {
@@ -1761,7 +1761,7 @@ impl Scaffold {
         // Boundary edges between glued points, each once. An edge whose reverse is a boundary
         // edge too is a closed slit: both its sides are the patch's, so no scaffold grows there.
         let mut directed: Vec<[usize; 2]> = Vec::with_capacity(ids.len());
-        let mut seen = std::collections::HashSet::new();
+        let mut seen = HashSet::new();
         for l in loops {
             for i in 0..l.len() {
                 let e = [l[i], l[(i + 1) % l.len()]].map(|v| vertex_of[&glue[v as usize]]);

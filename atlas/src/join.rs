@@ -49,7 +49,7 @@
 //!
 //! Sequential and free of hashing order: the result is deterministic.
 
-use std::collections::HashMap;
+use foldhash::{HashMap, HashMapExt};
 
 use nuvo_geometry::{TriMesh, UvLayer};
 use serde::Serialize;
