@@ -370,11 +370,14 @@ pub fn fit_steps(trainer: &mut Trainer, budget_seconds: f64) -> Result<(u64, Dec
     let per_step = t.elapsed().as_secs_f64() / TIMED_STEPS as f64;
     trainer.restore(&start)?;
     let steps = steps_for(budget_seconds, per_step);
+    let settles = trainer.config().training.stop_when_settled.is_some() && trainer.config().model.charts > 1;
     let why = format!(
-        "at most: {:.0} ms per step timed at the start (≈{:.0} ms on average over a run), {budget_seconds:.0} s \
-         of training budget; with more than one chart, training stops sooner once the charts hold still",
+        "{}{:.0} ms per step timed at the start (≈{:.0} ms on average over a run), {budget_seconds:.0} s of \
+         training budget{}",
+        if settles { "at most: " } else { "" },
         1e3 * per_step,
-        1e3 * per_step * MEAN_STEP_COST
+        1e3 * per_step * MEAN_STEP_COST,
+        if settles { "; training stops sooner once the charts hold still" } else { "" }
     );
     Ok((steps, Decision::new("steps", steps, why)))
 }
