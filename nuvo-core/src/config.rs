@@ -154,8 +154,10 @@ pub struct TrainingConfig {
     /// start, at most this share of a fixed sample of surface points changed chart
     /// (`crate::settling`). The atlas a bake makes changes little after that (the layout passes
     /// redo the distortion within each chart), while training on would mostly merge the last
-    /// small charts. `steps` stays the most a run takes. Runs of one chart ignore it (nothing to
-    /// assign). Not in the paper.
+    /// small charts. That holds for bakes with the layout passes (`output.refine`, `injective`,
+    /// `packing = "islands"`, as `nuvo unwrap` sets them); without them the networks' own maps
+    /// are the atlas and keep improving. `steps` stays the most a run takes. Runs of one chart
+    /// ignore it (nothing to assign). Not in the paper.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub stop_when_settled: Option<f32>,
     /// Finite-difference step of the distortion losses, in the model frame (the paper: 1e-2).
