@@ -334,13 +334,14 @@ fn summed_prob(probs: &[f32], n: usize, t: &[u32; 3], i: usize) -> f32 {
 }
 
 /// Chart `c`'s own UV at vertex `v` (`uvs` is `V × n × 2`).
-fn chart_uv(uvs: &[f32], n: usize, v: u32, c: usize) -> [f32; 2] {
+pub fn chart_uv(uvs: &[f32], n: usize, v: u32, c: usize) -> [f32; 2] {
     let k = (v as usize * n + c) * 2;
     [uvs[k], uvs[k + 1]]
 }
 
-/// Index of the largest value, the lowest index on ties.
-fn argmax(values: impl Iterator<Item = f32>) -> u32 {
+/// Index of the largest value, the lowest index on ties: a point's chart from its row of
+/// probabilities, as the bake takes it.
+pub fn argmax(values: impl Iterator<Item = f32>) -> u32 {
     let mut best = (0u32, f32::NEG_INFINITY);
     for (i, x) in values.enumerate() {
         if x > best.1 {

@@ -24,7 +24,7 @@
 use std::path::{Path, PathBuf};
 
 use nuvo_atlas::AtlasError;
-use nuvo_atlas::bake::{BakeOptions, BakeReport, ChartFields, RoundTrip, bake};
+use nuvo_atlas::bake::{BakeOptions, BakeReport, ChartFields, RoundTrip, argmax, bake, chart_uv};
 use nuvo_atlas::camera::orbit_views;
 use nuvo_atlas::export::{GlbOptions, glb_vertex_map, write_glb, write_obj};
 use nuvo_atlas::injective::{InjectiveOptions, InjectiveReport, make_injective};
@@ -43,7 +43,7 @@ use nuvo_losses::Networks;
 use serde::Serialize;
 
 use crate::config::{OutputConfig, Packing};
-use crate::trainer::{AtlasFields, Trainer};
+use crate::trainer::Trainer;
 
 /// Output file names.
 pub mod names {
@@ -444,13 +444,12 @@ fn write_point_uvs(
     let n = trainer.model().charts();
     let frame = trainer.source().to_canonical();
     let pts = trainer.source().sample(POINTS, trainer.config().seed).positions;
-    let AtlasFields { probs, uvs, .. } = trainer.evaluate_atlas(&pts);
+    let (probs, uvs) = trainer.evaluate_charts(&pts);
     let layout = AtlasLayout::grid(n, opts.atlas_resolution, opts.gutter)?;
     let mut csv = String::from("x,y,z,chart,u,v\n");
     for (k, p) in pts.iter().enumerate() {
-        let row = &probs[k * n..(k + 1) * n];
-        let chart = (0..n).fold(0, |best, i| if row[i] > row[best] { i } else { best });
-        let uv = layout.map(chart, [uvs[(k * n + chart) * 2], uvs[(k * n + chart) * 2 + 1]]);
+        let chart = argmax(probs[k * n..(k + 1) * n].iter().copied()) as usize;
+        let uv = layout.map(chart, chart_uv(&uvs, n, k as u32, chart));
         let q = frame.invert(*p);
         csv.push_str(&format!("{},{},{},{chart},{},{}\n", q[0], q[1], q[2], uv[0], uv[1]));
     }

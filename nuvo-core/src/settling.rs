@@ -13,6 +13,7 @@
 //! chart's UV spread that no rotation, scale and translation of the old UVs explains.
 
 use nalgebra::Vector2;
+use nuvo_atlas::bake::{argmax, chart_uv};
 
 /// What the networks say at the probe points: each point's chart (the most probable) and its UV
 /// in that chart.
@@ -31,10 +32,9 @@ impl Snapshot {
         let points = probs.len() / n.max(1);
         let mut snapshot = Snapshot { charts: Vec::with_capacity(points), uvs: Vec::with_capacity(points) };
         for (k, row) in probs.chunks_exact(n).enumerate() {
-            let chart = (0..n).fold(0, |best, i| if row[i] > row[best] { i } else { best });
-            snapshot.charts.push(chart as u32);
-            let at = 2 * (k * n + chart);
-            snapshot.uvs.push([uvs[at], uvs[at + 1]]);
+            let chart = argmax(row.iter().copied());
+            snapshot.charts.push(chart);
+            snapshot.uvs.push(chart_uv(uvs, n, k as u32, chart as usize));
         }
         snapshot
     }

@@ -312,7 +312,7 @@ impl Trainer {
     /// `training.stop_when_settled`, when it applies: one chart has no assignment to settle (its
     /// map alone keeps improving: a relief's single chart packed at 0.40 instead of 0.60 when
     /// stopped at the same point as the others, BENCHMARKS.md).
-    fn settling_threshold(&self) -> Option<f32> {
+    pub fn settling_threshold(&self) -> Option<f32> {
         self.config.training.stop_when_settled.filter(|_| self.model.charts() > 1)
     }
 
@@ -380,11 +380,23 @@ impl Trainer {
     /// The networks' fields at points given in the canonical frame (see [`AtlasFields`]),
     /// evaluated in chunks, one network pass at a time, so memory stays bounded on huge meshes.
     pub fn evaluate_atlas(&mut self, canonical: &[[f32; 3]]) -> AtlasFields {
+        self.fields_at(canonical, true)
+    }
+
+    /// [`AtlasFields::probs`] and [`AtlasFields::uvs`] alone: what a reader of charts and UVs needs,
+    /// without the surface networks' pass the round trip costs.
+    pub fn evaluate_charts(&mut self, canonical: &[[f32; 3]]) -> (Vec<f32>, Vec<f32>) {
+        let AtlasFields { probs, uvs, .. } = self.fields_at(canonical, false);
+        (probs, uvs)
+    }
+
+    /// [`Trainer::evaluate_atlas`]; `round_trip` empty unless `with_round_trip`.
+    fn fields_at(&mut self, canonical: &[[f32; 3]], with_round_trip: bool) -> AtlasFields {
         const CHUNK: usize = 16384;
         let n = self.model.charts();
         let mut probs = Vec::with_capacity(canonical.len() * n);
         let mut uvs = vec![0.0f32; canonical.len() * n * 2];
-        let mut round_trip = vec![0.0f32; canonical.len() * n];
+        let mut round_trip = vec![0.0f32; if with_round_trip { canonical.len() * n } else { 0 }];
         for (c, chunk) in canonical.chunks(CHUNK).enumerate() {
             let x = self.fresh_model_frame_input(chunk);
             let logits = self.model.chart_logits(&mut self.tape, x);
@@ -393,12 +405,17 @@ impl Trainer {
             for i in 0..n {
                 let x = self.fresh_model_frame_input(chunk);
                 let t = self.model.texture(&mut self.tape, i, x);
-                let back = self.model.surface(&mut self.tape, i, t);
-                let rows = self.tape.value(t).chunks_exact(2).zip(self.tape.value(back).chunks_exact(3));
-                for (k, ((uv, s), x)) in rows.zip(self.tape.value(x).chunks_exact(3)).enumerate() {
+                for (k, uv) in self.tape.value(t).chunks_exact(2).enumerate() {
                     let at = (c * CHUNK + k) * n + i;
                     uvs[2 * at..2 * at + 2].copy_from_slice(uv);
-                    round_trip[at] = s.iter().zip(x).map(|(a, b)| (a - b) * (a - b)).sum::<f32>().sqrt();
+                }
+                if with_round_trip {
+                    let back = self.model.surface(&mut self.tape, i, t);
+                    let rows = self.tape.value(back).chunks_exact(3).zip(self.tape.value(x).chunks_exact(3));
+                    for (k, (s, x)) in rows.enumerate() {
+                        let at = (c * CHUNK + k) * n + i;
+                        round_trip[at] = s.iter().zip(x).map(|(a, b)| (a - b) * (a - b)).sum::<f32>().sqrt();
+                    }
                 }
             }
         }
@@ -416,9 +433,9 @@ impl Trainer {
             self.probe_points = self.source.sample(PROBE_POINTS, seed).positions;
         }
         let points = std::mem::take(&mut self.probe_points);
-        let fields = self.evaluate_atlas(&points);
+        let (probs, uvs) = self.evaluate_charts(&points);
         self.probe_points = points;
-        Snapshot::from_fields(&fields.probs, &fields.uvs, self.model.charts())
+        Snapshot::from_fields(&probs, &uvs, self.model.charts())
     }
 
     /// Clears the tape and records `canonical` points, scaled into the model frame, as its input.

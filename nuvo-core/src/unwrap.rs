@@ -370,7 +370,7 @@ pub fn fit_steps(trainer: &mut Trainer, budget_seconds: f64) -> Result<(u64, Dec
     let per_step = t.elapsed().as_secs_f64() / TIMED_STEPS as f64;
     trainer.restore(&start)?;
     let steps = steps_for(budget_seconds, per_step);
-    let settles = trainer.config().training.stop_when_settled.is_some() && trainer.config().model.charts > 1;
+    let settles = trainer.settling_threshold().is_some();
     let why = format!(
         "{}{:.0} ms per step timed at the start (≈{:.0} ms on average over a run), {budget_seconds:.0} s of \
          training budget{}",
