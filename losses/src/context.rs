@@ -4,11 +4,15 @@
 //! records the evaluation on the tape and caches the [`Var`]; later requests, from the same or another
 //! loss, get the cached one. So however many losses read `t_i(x)`, each network runs once per input.
 //!
-//! The `support_*` getters serve the losses whose per-chart terms are weighted by `c(x)[i]`: they
-//! evaluate chart `i` only on its *support*, the samples where `c(x)[i] ≥ τ`
-//! (`training.chart_support`). Once the charts have settled, most samples belong to one or two of
-//! them, so this skips most of the per-chart passes over the 3-D samples while changing each loss
-//! by less than `τ` times its size. With `τ = 0` they return exactly what the plain getters do.
+//! A per-chart quantity of the 3-D samples is asked for with a [`ChartRows`]: chart `i` on a set of
+//! [`Samples`]. The same handle gives the probabilities `c(x)[i]` on those rows
+//! ([`StepContext::chart_weights`]) and pairs each term with them in [`crate::chart_weighted_mean`],
+//! so a term and its weights cannot cover different rows. [`Samples::Support`] serves the losses
+//! whose per-chart terms are weighted by `c(x)[i]`: chart `i` is evaluated only on its *support*,
+//! the samples where `c(x)[i] ≥ τ` (`training.chart_support`). Once the charts have settled, most
+//! samples belong to one or two of them, so this skips most of the per-chart passes over the 3-D
+//! samples while changing each loss by less than `τ` times its size. With `τ = 0` the support is
+//! every sample, and a term is exactly what [`Samples::All`] gives.
 
 use nuvo_autodiff::{Shape, Tape, Var};
 
@@ -32,12 +36,12 @@ pub struct StepData<'a> {
     pub tangents_q: &'a [[f32; 3]],
     /// Finite-difference step `ε` of the distortion losses (the paper uses 1e-2).
     pub epsilon: f32,
-    /// The chart-support threshold `τ` of the `support_*` getters (`training.chart_support`): chart
+    /// The chart-support threshold `τ` of [`Samples::Support`] (`training.chart_support`): chart
     /// `i` is evaluated on the samples where `c(x)[i] ≥ τ`. 0 evaluates every chart everywhere.
     pub chart_support: f32,
 }
 
-/// The 3-D samples a chart is evaluated on by the `support_*` getters: those where its probability
+/// The 3-D samples of [`Samples::Support`] for one chart: those where its probability
 /// reaches the threshold. Invariant: `rows` is strictly increasing and non-empty, so the distortion
 /// samples among them (indices below `k`) are its first `distortion` entries.
 #[derive(Clone, Debug)]
@@ -71,15 +75,48 @@ struct Cache {
     support_cycle_points: Vec<Option<Var>>,
 }
 
-/// Which 3-D samples a per-chart column of a loss covers (see [`crate::chart_weighted_mean`]).
+/// Which of a step's 3-D samples a per-chart quantity covers.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Samples {
-    /// Every sample of the batch.
+    /// Every sample of the batch (`B` rows).
     All,
-    /// The chart's support ([`StepContext::support_tex`] and the other `support_*` getters).
+    /// The chart's support: the samples where `c(x)[i] ≥ τ` (`StepData::chart_support`); every
+    /// sample when `τ = 0` or when the chart reaches `τ` everywhere.
     Support,
-    /// The distortion samples in the chart's support ([`StepContext::support_uv_differentials`]).
+    /// The distortion samples: the first `k` of the batch (see [`StepData`]).
+    Distortion,
+    /// The distortion samples in the chart's support.
     DistortionSupport,
+}
+
+impl Samples {
+    /// Whether these are distortion samples, which the UV differentials are defined on.
+    pub fn is_distortion(self) -> bool {
+        matches!(self, Samples::Distortion | Samples::DistortionSupport)
+    }
+
+    /// Whether these are the chart's support (or its distortion samples).
+    fn is_support(self) -> bool {
+        matches!(self, Samples::Support | Samples::DistortionSupport)
+    }
+}
+
+/// Chart `i` on a set of [`Samples`]: what the per-chart getters of [`StepContext`] take, and what
+/// [`crate::chart_weighted_mean`] pairs each term with, so a term and the probabilities `c(x)[i]` that
+/// weigh it always cover the same rows. A plain value: it records nothing until a getter uses it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ChartRows {
+    /// The chart `i`.
+    pub chart: usize,
+    /// Which samples.
+    pub samples: Samples,
+}
+
+impl ChartRows {
+    /// Chart `chart` on `samples`.
+    pub fn new(chart: usize, samples: Samples) -> Self {
+        ChartRows { chart, samples }
+    }
 }
 
 /// Shared forward results of one step. See the module docs.
@@ -190,8 +227,14 @@ impl<'a> StepContext<'a> {
         })
     }
 
-    /// `t_i(x)` (`B×2`).
-    pub fn tex(&mut self, i: usize) -> Var {
+    /// `t_i(x)` on the rows `r` names (`rows×2`).
+    pub fn tex(&mut self, r: ChartRows) -> Var {
+        let t = if r.samples.is_support() { self.support_tex(r.chart) } else { self.tex_everywhere(r.chart) };
+        self.first_distortion_rows(r, t)
+    }
+
+    /// `t_i(x)` on every sample.
+    fn tex_everywhere(&mut self, i: usize) -> Var {
         cached!(self.tex[i], {
             let x = self.x();
             self.nets.texture(self.tape, i, x)
@@ -214,8 +257,8 @@ impl<'a> StepContext<'a> {
         })
     }
 
-    /// `(t_i(x + εp), t_i(x + εq))` for the distortion samples.
-    pub fn tex_at_offsets(&mut self, i: usize) -> (Var, Var) {
+    /// `(t_i(x + εp), t_i(x + εq))` for every distortion sample.
+    fn tex_at_offsets(&mut self, i: usize) -> (Var, Var) {
         cached!(self.tex_offsets[i], {
             let (xp, xq) = self.offsets();
             (self.nets.texture(self.tape, i, xp), self.nets.texture(self.tape, i, xq))
@@ -227,25 +270,58 @@ impl<'a> StepContext<'a> {
         self.data.tangents_p.len()
     }
 
-    /// The paper's UV vectors `D t_i(εp) ≈ t_i(x + εp) − t_i(x)` and `D t_i(εq)` (`k×2` each, for
-    /// the first [`Self::batch_distortion`] samples): the finite-difference images of the tangent
-    /// vectors `εp` and `εq` (not divided by `ε`).
-    pub fn uv_differentials(&mut self, i: usize) -> (Var, Var) {
+    /// The paper's UV vectors `D t_i(εp) ≈ t_i(x + εp) − t_i(x)` and `D t_i(εq)` (`rows×2` each) on
+    /// the distortion samples `r` names: the finite-difference images of the tangent vectors `εp`
+    /// and `εq` (not divided by `ε`).
+    ///
+    /// # Panics
+    /// When `r` names other than distortion samples (a programming error: the tangents exist only
+    /// there).
+    pub fn uv_differentials(&mut self, r: ChartRows) -> (Var, Var) {
+        match r.samples {
+            Samples::Distortion => self.uv_differentials_everywhere(r.chart),
+            Samples::DistortionSupport => self.support_uv_differentials(r.chart),
+            other => panic!("UV differentials exist on the distortion samples only, not {other:?}"),
+        }
+    }
+
+    /// [`Self::uv_differentials`] on every distortion sample.
+    fn uv_differentials_everywhere(&mut self, i: usize) -> (Var, Var) {
         cached!(self.differentials[i], {
             let k = self.batch_distortion();
-            let t = self.tex(i);
+            let t = self.tex_everywhere(i);
             let t = if k < self.batch_3d() { self.tape.slice_rows(t, 0, k) } else { t };
             let (tp, tq) = self.tex_at_offsets(i);
             (self.tape.sub(tp, t), self.tape.sub(tq, t))
         })
     }
 
-    /// `s_i(t_i(x))`, the 3→2→3 round trip (`B×3`).
-    pub fn cycle_points(&mut self, i: usize) -> Var {
+    /// `s_i(t_i(x))`, the 3→2→3 round trip, on the rows `r` names (`rows×3`).
+    pub fn cycle_points(&mut self, r: ChartRows) -> Var {
+        let s = if r.samples.is_support() {
+            self.support_cycle_points(r.chart)
+        } else {
+            self.cycle_points_everywhere(r.chart)
+        };
+        self.first_distortion_rows(r, s)
+    }
+
+    /// `s_i(t_i(x))` on every sample.
+    fn cycle_points_everywhere(&mut self, i: usize) -> Var {
         cached!(self.cycle_points[i], {
-            let t = self.tex(i);
+            let t = self.tex_everywhere(i);
             self.nets.surface(self.tape, i, t)
         })
+    }
+
+    /// `v`, a quantity of the rows of `r`'s chart on all its samples or on its support, cut to its
+    /// distortion samples when `r` names those (they come first).
+    fn first_distortion_rows(&mut self, r: ChartRows, v: Var) -> Var {
+        if !r.samples.is_distortion() {
+            return v;
+        }
+        let rows = self.row_count(r);
+        if self.tape.shape(v).rows == rows { v } else { self.tape.slice_rows(v, 0, rows) }
     }
 
     /// `s_i(u)` (`|T|×3`).
@@ -293,15 +369,27 @@ impl<'a> StepContext<'a> {
         self.cache.support[i].as_ref().and_then(Option::as_ref)
     }
 
-    /// The rows of `v` that `samples` names for chart `i` (`v` covers the batch, or the `k`
-    /// distortion samples for [`Samples::DistortionSupport`]), gathered; `v` itself when that is
-    /// all of them. Reads the cached support in place (no copy of its rows).
-    fn rows_of(&mut self, i: usize, v: Var, samples: Samples) -> Var {
-        if samples == Samples::All || self.support(i).is_none() {
-            return v;
+    /// How many rows the quantities of `r` have.
+    pub fn row_count(&mut self, r: ChartRows) -> usize {
+        let (b, k) = (self.batch_3d(), self.batch_distortion());
+        let support = if r.samples.is_support() { self.support(r.chart) } else { None };
+        match (r.samples, support) {
+            (Samples::Support, Some(s)) => s.rows.len(),
+            (Samples::DistortionSupport, Some(s)) => s.distortion,
+            (Samples::Distortion | Samples::DistortionSupport, _) => k,
+            (Samples::All | Samples::Support, _) => b,
         }
-        let support = self.cache.support[i].as_ref().and_then(Option::as_ref).expect("computed above");
-        let rows = match samples {
+    }
+
+    /// The rows of `v` that `r` names, gathered: `v` is a quantity of every sample (`B` rows) or,
+    /// for distortion samples, of every distortion sample (`k` rows); `v` itself when `r` names all
+    /// of its rows.
+    pub fn select(&mut self, r: ChartRows, v: Var) -> Var {
+        if !r.samples.is_support() || self.support(r.chart).is_none() {
+            return self.first_distortion_rows(r, v);
+        }
+        let support = self.cache.support[r.chart].as_ref().and_then(Option::as_ref).expect("computed above");
+        let rows = match r.samples {
             Samples::DistortionSupport => &support.rows[..support.distortion],
             _ => &support.rows[..],
         };
@@ -329,22 +417,17 @@ impl<'a> StepContext<'a> {
         Some(Support { rows, distortion })
     }
 
-    /// The rows of `v` (a `B×k` quantity of the 3-D samples) on chart `i`'s support, in the order of
-    /// [`Self::support_tex`]; `v` itself when the support is every sample.
-    pub fn on_support(&mut self, i: usize, v: Var) -> Var {
-        self.rows_of(i, v, Samples::Support)
-    }
-
-    /// Chart `i`'s probabilities `c(x)[i]` on the samples `samples` covers (a column).
-    pub fn chart_probs_on(&mut self, i: usize, samples: Samples) -> Var {
+    /// Chart `i`'s probabilities `c(x)[i]` on the rows `r` names (a column): the weights of its
+    /// terms.
+    pub fn chart_weights(&mut self, r: ChartRows) -> Var {
         let c = self.chart_probs();
-        let column = self.tape.slice_cols(c, i, 1);
-        match samples {
-            Samples::DistortionSupport if self.support(i).is_none() => {
+        let column = self.tape.slice_cols(c, r.chart, 1);
+        match r.samples {
+            Samples::Distortion | Samples::DistortionSupport if self.support(r.chart).is_none() => {
                 let k = self.batch_distortion();
                 self.tape.slice_rows(column, 0, k)
             }
-            _ => self.rows_of(i, column, samples),
+            _ => self.select(r, column),
         }
     }
 
@@ -353,39 +436,40 @@ impl<'a> StepContext<'a> {
         (0..self.charts()).any(|i| self.support(i).is_some())
     }
 
-    /// `t_i(x)` on chart `i`'s support: [`Self::tex`] when that is every sample. The losses whose
+    /// `t_i(x)` on chart `i`'s support: every sample when that is all of them. The losses whose
     /// terms are weighted by `c(x)[i]` read this, so a term weighing less than `τ` costs nothing.
-    pub fn support_tex(&mut self, i: usize) -> Var {
+    fn support_tex(&mut self, i: usize) -> Var {
         if self.support(i).is_none() {
-            return self.tex(i);
+            return self.tex_everywhere(i);
         }
         cached!(self.support_tex[i], {
             let x = self.x();
-            let x = self.on_support(i, x);
+            let x = self.select(ChartRows::new(i, Samples::Support), x);
             self.nets.texture(self.tape, i, x)
         })
     }
 
-    /// [`Self::uv_differentials`] on the distortion samples of chart `i`'s support.
-    pub fn support_uv_differentials(&mut self, i: usize) -> (Var, Var) {
+    /// The UV differentials on the distortion samples of chart `i`'s support.
+    fn support_uv_differentials(&mut self, i: usize) -> (Var, Var) {
         if self.support(i).is_none() {
-            return self.uv_differentials(i);
+            return self.uv_differentials_everywhere(i);
         }
         cached!(self.support_differentials[i], {
             let t = self.support_tex(i);
             let (xp, xq) = self.offsets();
-            let xp = self.rows_of(i, xp, Samples::DistortionSupport);
-            let xq = self.rows_of(i, xq, Samples::DistortionSupport);
+            let rows = ChartRows::new(i, Samples::DistortionSupport);
+            let xp = self.select(rows, xp);
+            let xq = self.select(rows, xq);
             let t = self.tape.slice_rows(t, 0, self.tape.shape(xp).rows);
             let (tp, tq) = (self.nets.texture(self.tape, i, xp), self.nets.texture(self.tape, i, xq));
             (self.tape.sub(tp, t), self.tape.sub(tq, t))
         })
     }
 
-    /// [`Self::cycle_points`] on chart `i`'s support.
-    pub fn support_cycle_points(&mut self, i: usize) -> Var {
+    /// `s_i(t_i(x))` on chart `i`'s support.
+    fn support_cycle_points(&mut self, i: usize) -> Var {
         if self.support(i).is_none() {
-            return self.cycle_points(i);
+            return self.cycle_points_everywhere(i);
         }
         cached!(self.support_cycle_points[i], {
             let t = self.support_tex(i);

@@ -2,7 +2,7 @@
 
 use nuvo_autodiff::Var;
 
-use crate::context::{Samples, StepContext};
+use crate::context::{ChartRows, Samples, StepContext};
 
 /// Why a loss could not be built or evaluated.
 #[derive(Debug, thiserror::Error)]
@@ -29,28 +29,40 @@ pub trait Loss: Send + Sync {
 }
 
 /// `(1/|G|) Σ_x Σ_i c(x)[i] · d_i(x)`: the chart-probability-weighted batch mean that most of the
-/// paper's 3-D losses share. `per_chart[i]` is `d_i`, a column over the samples `samples` names for
-/// chart `i` (every sample; the chart's support; the distortion samples of its support), and the
-/// mean divides by the batch those are drawn from (`B`, or the `k` distortion samples), so the
-/// terms a support leaves out count as zero.
-pub fn chart_weighted_mean(ctx: &mut StepContext<'_>, per_chart: &[Var], samples: Samples) -> Var {
-    let whole = match samples {
-        Samples::All | Samples::Support => ctx.batch_3d(),
-        Samples::DistortionSupport => ctx.batch_distortion(),
-    };
+/// paper's 3-D losses share. `per_chart[i]` is `(rows, d_i)`: chart `i`'s term, a column over the
+/// samples its [`ChartRows`] name (every sample; the chart's support; the distortion samples, or
+/// those of its support), weighted by `c(x)[i]` on those same rows. The mean divides by the batch
+/// the samples are drawn from (`B`, or the `k` distortion samples), so the terms a support leaves
+/// out count as zero.
+///
+/// # Panics
+/// Unless `per_chart` holds charts `0..n` in order, all on the same kind of samples, each term with
+/// as many rows as its samples (programming errors a loss's tests catch).
+pub fn chart_weighted_mean(ctx: &mut StepContext<'_>, per_chart: &[(ChartRows, Var)]) -> Var {
+    let samples = per_chart.first().map(|(r, _)| r.samples).expect("a Nuvo atlas has at least one chart");
+    for (i, &(r, d)) in per_chart.iter().enumerate() {
+        assert!(
+            r.chart == i && r.samples == samples && per_chart.len() == ctx.charts(),
+            "chart_weighted_mean takes every chart in order, on one kind of samples"
+        );
+        let rows = ctx.row_count(r);
+        assert_eq!(ctx.tape.shape(d).rows, rows, "chart {i}'s term covers other rows than {samples:?}");
+    }
+    let whole = if samples.is_distortion() { ctx.batch_distortion() } else { ctx.batch_3d() };
     let scale = 1.0 / whole.max(1) as f32;
-    if samples == Samples::All || !ctx.is_pruned() {
+    let terms: Vec<Var> = per_chart.iter().map(|&(_, d)| d).collect();
+    if samples == Samples::All || samples == Samples::Distortion || !ctx.is_pruned() {
         let all = ctx.chart_probs();
         let c = if whole < ctx.batch_3d() { ctx.tape.slice_rows(all, 0, whole) } else { all };
         let t = &mut *ctx.tape;
-        let d = if per_chart.len() == 1 { per_chart[0] } else { t.concat_cols(per_chart) };
+        let d = if terms.len() == 1 { terms[0] } else { t.concat_cols(&terms) };
         let w = t.mul(d, c);
         let s = t.sum_all(w);
         return t.scale(s, scale);
     }
     let mut total: Option<Var> = None;
-    for (i, &d) in per_chart.iter().enumerate() {
-        let c = ctx.chart_probs_on(i, samples);
+    for &(r, d) in per_chart {
+        let c = ctx.chart_weights(r);
         let t = &mut *ctx.tape;
         let w = t.mul(d, c);
         let s = t.sum_all(w);
@@ -73,6 +85,7 @@ pub fn squared_distance(ctx: &mut StepContext<'_>, a: Var, b: Var) -> Var {
 
 #[cfg(test)]
 mod tests {
+    use super::*;
     use crate::builtin::{Conformal, Cycle3d, Stretch, StretchOptions, Texture};
     use crate::testing::{Scene, check_loss_gradient_on};
 
@@ -135,5 +148,60 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Pairs chart `i`'s term on its support with the weights of every sample.
+    struct Mismatched;
+    impl crate::Loss for Mismatched {
+        fn evaluate(&self, ctx: &mut StepContext<'_>) -> Result<Var, LossError> {
+            let per_chart: Vec<(ChartRows, Var)> = (0..ctx.charts())
+                .map(|i| {
+                    let t = ctx.tex(ChartRows::new(i, Samples::Support));
+                    (ChartRows::new(i, Samples::All), ctx.tape.slice_cols(t, 0, 1))
+                })
+                .collect();
+            Ok(chart_weighted_mean(ctx, &per_chart))
+        }
+    }
+
+    #[test]
+    #[should_panic(expected = "covers other rows")]
+    fn a_term_paired_with_the_weights_of_other_rows_is_caught() {
+        crossing_charts().with_chart_support(0.5).evaluate(&Mismatched);
+    }
+
+    /// Checks every per-chart getter's row count against [`StepContext::row_count`].
+    struct RowCounts;
+    impl crate::Loss for RowCounts {
+        fn evaluate(&self, ctx: &mut StepContext<'_>) -> Result<Var, LossError> {
+            let x = ctx.x();
+            for i in 0..ctx.charts() {
+                for samples in
+                    [Samples::All, Samples::Support, Samples::Distortion, Samples::DistortionSupport]
+                {
+                    let r = ChartRows::new(i, samples);
+                    let rows = ctx.row_count(r);
+                    let (tex, back, picked, w) =
+                        (ctx.tex(r), ctx.cycle_points(r), ctx.select(r, x), ctx.chart_weights(r));
+                    for v in [tex, back, picked, w] {
+                        assert_eq!(ctx.tape.shape(v).rows, rows, "chart {i}, {samples:?}");
+                    }
+                    if samples.is_distortion() {
+                        let (a, b) = ctx.uv_differentials(r);
+                        assert_eq!((ctx.tape.shape(a).rows, ctx.tape.shape(b).rows), (rows, rows));
+                    }
+                }
+            }
+            Ok(ctx.tape.constant(nuvo_autodiff::Shape::SCALAR, 0.0))
+        }
+    }
+
+    #[test]
+    fn every_getter_covers_the_rows_its_handle_names() {
+        // Two samples, the first one alone a distortion sample; the support keeps one sample per
+        // chart (chart 0 the second, chart 1 the first) plus chart 0's most probable distortion one.
+        let scene = crossing_charts().with_chart_support(0.5).with_distortion_samples(1);
+        scene.evaluate(&RowCounts);
+        crossing_charts().evaluate(&RowCounts);
     }
 }

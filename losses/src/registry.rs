@@ -25,8 +25,23 @@ pub struct LossInfo {
     pub options: &'static [OptionDoc],
 }
 
+/// A loss the registry can build by name: what `nuvo losses` says about it, and a constructor from
+/// its `[losses.NAME]` table. The paper's losses and an application's own take this one shape, the
+/// shape of a run-time plugin (`nuvo_plugin_api::LossPlugin`: associated info and a constructor).
+pub trait RegisteredLoss: Loss + Sized + 'static {
+    /// Its name, summary, default weight and options.
+    const INFO: LossInfo;
+
+    /// The loss with these options (the `[losses.NAME]` table without `weight`).
+    fn from_options(options: &toml::Table) -> Result<Self, LossError>;
+}
+
 /// Builds a loss from its options table (the `[losses.NAME]` table without `weight`).
-pub type LossBuilder = fn(&toml::Table) -> Result<Box<dyn Loss>, LossError>;
+type LossBuilder = fn(&toml::Table) -> Result<Box<dyn Loss>, LossError>;
+
+fn build<L: RegisteredLoss>(options: &toml::Table) -> Result<Box<dyn Loss>, LossError> {
+    Ok(Box::new(L::from_options(options)?))
+}
 
 /// The registry of losses by name.
 #[derive(Default)]
@@ -43,13 +58,13 @@ impl LossRegistry {
     /// A registry with every loss of the paper.
     pub fn with_builtins() -> Self {
         let mut r = Self::new();
-        crate::builtin::register_all(&mut r);
+        crate::builtin::add_all(&mut r);
         r
     }
 
-    /// Registers (or replaces) a loss.
-    pub fn register(&mut self, info: LossInfo, build: LossBuilder) {
-        self.entries.insert(info.name, (info, build));
+    /// Registers (or replaces) loss `L` under `L::INFO.name`.
+    pub fn add<L: RegisteredLoss>(&mut self) {
+        self.entries.insert(L::INFO.name, (L::INFO, build::<L>));
     }
 
     /// Everything registered, sorted by name.

@@ -12,13 +12,13 @@ use nuvo_autodiff::{ParamStore, Shape, Tape, Var};
 use nuvo_geometry::{BuildContext, GeometryError, GeometrySource, SourceRegistry};
 use nuvo_losses::{Loss, LossError, LossRegistry, Networks, StepContext};
 
-use crate::batch::{ShortBatch, StepBatch, surface_samples};
+use crate::batch::{ShortBatch, StepBatch};
 use crate::checkpoint::{Checkpoint, CheckpointError};
 use crate::config::{ConfigError, ExperimentConfig, LoadedConfig};
 use crate::model::{MODEL_FRAME_SCALE, NuvoModel, groups};
 use crate::seeds::{Stream, derive};
 use crate::settling::{Movement, Snapshot, movement};
-use crate::warm_start::{ProjectionPrior, WarmStartConfig};
+use crate::warm_start::ProjectionPrior;
 
 /// Anything that stops training.
 #[derive(Debug, thiserror::Error)]
@@ -52,25 +52,52 @@ pub enum TrainError {
     Diverged(String),
 }
 
-/// One weighted term of the objective.
+/// One weighted term of the objective: a `[losses.NAME]` loss, or the `[warm_start]` prior.
 pub struct Term {
-    /// The `[losses.NAME]` key.
+    /// The `[losses.NAME]` key ([`WARM_START_TERM`] for the prior).
     pub name: String,
     /// Its weight (> 0; zero-weight terms are not built).
     pub weight: f32,
-    /// Steps over which the weight ramps up linearly from 0 (0: none).
-    pub warmup_steps: u64,
+    /// How the weight changes over the run.
+    pub schedule: WeightSchedule,
+    /// Whether the term reads every chart on every sample. While such a term weighs in, chart
+    /// support (`training.chart_support`) is off: the charts' passes over every sample are recorded
+    /// anyway, so pruning the other terms to the charts' supports would only add passes (and the
+    /// projection prior's chart probabilities are still soft).
+    pub reads_every_chart: bool,
     loss: Box<dyn Loss>,
 }
 
+/// How a term's weight `w` changes over the run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WeightSchedule {
+    /// `w · min(1, (step + 1) / steps)`: up from `w / steps` to `w` (`[losses.NAME] warmup_steps`;
+    /// 0 is a constant weight).
+    RampUp { steps: u64 },
+    /// `w · (1 − step / steps)`, 0 from `steps` on: down to nothing, after which the term has
+    /// ended and is not recorded (the `[warm_start]` prior).
+    FadeOut { steps: u64 },
+}
+
 impl Term {
-    /// The weight at 0-based `step`: `weight · min(1, (step + 1) / warmup_steps)`.
+    /// The weight at 0-based `step`.
     pub fn weight_at(&self, step: u64) -> f32 {
-        if step >= self.warmup_steps {
-            self.weight
-        } else {
-            self.weight * (step + 1) as f32 / self.warmup_steps as f32
+        match self.schedule {
+            WeightSchedule::RampUp { steps } if step < steps => {
+                self.weight * (step + 1) as f32 / steps as f32
+            }
+            WeightSchedule::RampUp { .. } => self.weight,
+            WeightSchedule::FadeOut { steps } if step < steps => {
+                self.weight * (1.0 - step as f32 / steps as f32)
+            }
+            WeightSchedule::FadeOut { .. } => 0.0,
         }
+    }
+
+    /// Whether the term is a prior still fading out at `step` (it holds the charts in place
+    /// until then).
+    pub fn is_fading(&self, step: u64) -> bool {
+        matches!(self.schedule, WeightSchedule::FadeOut { steps } if step < steps)
     }
 }
 
@@ -118,8 +145,6 @@ pub struct Trainer {
     step: u64,
     lr_scale: f32,
     batch: StepBatch,
-    /// The projection prior and its schedule, when `[warm_start]` is enabled.
-    warm_start: Option<(ProjectionPrior, WarmStartConfig)>,
     /// The settling probe's points (drawn on first use).
     probe_points: Vec<[f32; 3]>,
     /// The probe's last look (`training.stop_when_settled`).
@@ -157,8 +182,11 @@ impl Trainer {
         losses: &LossRegistry,
     ) -> Result<Self, TrainError> {
         let config = loaded.config.clone();
-        let terms = build_terms(&config, loaded, losses)?;
-        let warm_start = fit_warm_start(&config, &*source)?;
+        let mut terms = build_terms(&config, loaded, losses)?;
+        if let Some(term) = warm_start_term(&config, &*source)? {
+            // Last, where the prior has always been added to the sum.
+            terms.push(term);
+        }
         let mut params = ParamStore::new();
         let model = NuvoModel::new(&config.model, &mut params, derive(config.seed, 0, Stream::Init));
         let o = &config.optimizer;
@@ -185,7 +213,6 @@ impl Trainer {
             step: 0,
             lr_scale: 1.0,
             batch: StepBatch::default(),
-            warm_start,
             probe_points: Vec::new(),
             last_look: None,
             settled_looks: 0,
@@ -212,12 +239,7 @@ impl Trainer {
         self.tape.params()
     }
 
-    /// The projection prior of `[warm_start]`, when enabled.
-    pub fn warm_start(&self) -> Option<&ProjectionPrior> {
-        self.warm_start.as_ref().map(|(prior, _)| prior)
-    }
-
-    /// The enabled terms.
+    /// The enabled terms, in the order they are summed (the `[warm_start]` prior last).
     pub fn terms(&self) -> &[Term] {
         &self.terms
     }
@@ -301,7 +323,7 @@ impl Trainer {
         let now = self.probe();
         let moved = self.last_look.as_ref().map(|before| movement(before, &now));
         self.last_look = Some(now);
-        let prior_faded = self.warm_start.as_ref().is_none_or(|(_, cfg)| self.step >= cfg.steps);
+        let prior_faded = !self.terms.iter().any(|t| t.is_fading(self.step));
         match moved {
             Some(m) if prior_faded && m.charts_changed <= threshold => self.settled_looks += 1,
             _ => self.settled_looks = 0,
@@ -334,29 +356,24 @@ impl Trainer {
             if only.is_some_and(|o| o != k) {
                 continue;
             }
+            let weight = term.weight_at(self.step);
+            if weight <= 0.0 {
+                continue;
+            }
             let v = term.loss.evaluate(&mut ctx)?;
             values.push((term.name.clone(), ctx.tape.scalar(v)));
-            total = Some(add_weighted(ctx.tape, total, v, term.weight_at(self.step)));
-        }
-        if let Some((prior, cfg)) = &self.warm_start
-            && only.is_none()
-        {
-            let weight = cfg.weight_at(self.step);
-            if weight > 0.0 {
-                let v = prior.evaluate(&mut ctx);
-                values.push((WARM_START_TERM.to_owned(), ctx.tape.scalar(v)));
-                total = Some(add_weighted(ctx.tape, total, v, weight));
-            }
+            total = Some(add_weighted(ctx.tape, total, v, weight));
         }
         Ok(total.unwrap_or_else(|| ctx.tape.constant(Shape::SCALAR, 0.0)))
     }
 
-    /// `training.chart_support` at `step`: 0 while the warm-start prior still weighs in (its
-    /// chart probabilities are still soft, and it reads every chart everywhere anyway).
+    /// `training.chart_support` at `step`: 0 while a term that reads every chart everywhere
+    /// weighs in (see [`Term::reads_every_chart`]).
     fn chart_support_at(&self, step: u64) -> f32 {
-        match &self.warm_start {
-            Some((_, cfg)) if cfg.weight_at(step) > 0.0 => 0.0,
-            _ => self.config.training.chart_support,
+        if self.terms.iter().any(|t| t.reads_every_chart && t.weight_at(step) > 0.0) {
+            0.0
+        } else {
+            self.config.training.chart_support
         }
     }
 
@@ -511,8 +528,6 @@ impl Trainer {
     }
 }
 
-/// Fits the projection prior to a sample of the scene drawn from the run's own seed, so a resumed
-/// run fits the same one.
 /// The geometry source `loaded`'s `[geometry]` table names, built from `sources`, with errors that
 /// locate the config key.
 pub fn build_source(
@@ -539,23 +554,21 @@ pub fn build_source(
     Ok(built)
 }
 
-fn fit_warm_start(
+/// The `[warm_start]` prior as a term, when enabled: fitted to a sample of the scene drawn from
+/// the run's own seed (so a resumed run fits the same one), its weight fading out.
+fn warm_start_term(
     config: &ExperimentConfig,
     source: &dyn GeometrySource,
-) -> Result<Option<(ProjectionPrior, WarmStartConfig)>, TrainError> {
-    let Some(cfg) = config.warm_start.clone().filter(WarmStartConfig::enabled) else {
-        return Ok(None);
-    };
-    let sample = surface_samples(source, cfg.samples, derive(config.seed, 0, Stream::WarmStart))?;
-    let prior = ProjectionPrior::fit(
-        &sample.points,
-        &sample.normals,
-        config.model.charts,
-        cfg.projection,
-        cfg.min_alignment,
-        cfg.occlusion,
-    );
-    Ok(Some((prior, cfg)))
+) -> Result<Option<Term>, TrainError> {
+    let Some(cfg) = &config.warm_start else { return Ok(None) };
+    let Some(prior) = ProjectionPrior::for_run(config, source)? else { return Ok(None) };
+    Ok(Some(Term {
+        name: WARM_START_TERM.to_owned(),
+        weight: cfg.weight,
+        schedule: WeightSchedule::FadeOut { steps: cfg.steps },
+        reads_every_chart: true,
+        loss: Box::new(prior),
+    }))
 }
 
 /// `total + weight · v` on the tape (`weight · v` when there is no total yet).
@@ -571,7 +584,7 @@ fn grads_finite(p: &ParamStore) -> bool {
     p.ids().all(|id| p.grad(id).data().iter().all(|g| g.is_finite()))
 }
 
-/// The enabled terms, in config order (all built-ins at paper weights when `[losses]` is absent).
+/// The enabled terms, in config order (the paper's eight at their weights when `[losses]` is absent).
 fn build_terms(
     config: &ExperimentConfig,
     loaded: &LoadedConfig,
@@ -580,7 +593,10 @@ fn build_terms(
     let src = &loaded.source;
     type Listed = (String, Option<f32>, Option<u64>, toml::Table);
     let listed: Vec<Listed> = match &config.losses {
-        None => registry.list().map(|i| (i.name.to_owned(), None, None, toml::Table::new())).collect(),
+        None => nuvo_losses::builtin::PAPER
+            .iter()
+            .map(|&n| (n.to_owned(), None, None, toml::Table::new()))
+            .collect(),
         Some(map) => {
             map.iter().map(|(k, l)| (k.clone(), l.weight, l.warmup_steps, l.options.clone())).collect()
         }
@@ -618,8 +634,42 @@ fn build_terms(
         };
         let weight = weight.unwrap_or(default_weight);
         if weight > 0.0 {
-            terms.push(Term { name, weight, warmup_steps: warmup_steps.unwrap_or(0), loss });
+            let schedule = WeightSchedule::RampUp { steps: warmup_steps.unwrap_or(0) };
+            terms.push(Term { name, weight, schedule, reads_every_chart: false, loss });
         }
     }
     Ok(terms)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    struct Zero;
+    impl Loss for Zero {
+        fn evaluate(&self, ctx: &mut StepContext<'_>) -> Result<Var, LossError> {
+            Ok(ctx.tape.constant(Shape::SCALAR, 0.0))
+        }
+    }
+
+    fn term(weight: f32, schedule: WeightSchedule) -> Term {
+        Term { name: "t".into(), weight, schedule, reads_every_chart: false, loss: Box::new(Zero) }
+    }
+
+    #[test]
+    fn weights_ramp_up_and_fade_out_linearly() {
+        let weights = |t: &Term| (0..6).map(|s| t.weight_at(s)).collect::<Vec<f32>>();
+        assert_eq!(
+            weights(&term(10.0, WeightSchedule::RampUp { steps: 4 })),
+            [2.5, 5.0, 7.5, 10.0, 10.0, 10.0]
+        );
+        assert_eq!(weights(&term(10.0, WeightSchedule::RampUp { steps: 0 })), [10.0; 6]);
+        let prior = term(8.0, WeightSchedule::FadeOut { steps: 4 });
+        assert_eq!(weights(&prior), [8.0, 6.0, 4.0, 2.0, 0.0, 0.0]);
+        assert_eq!(
+            (0..6).map(|s| prior.is_fading(s)).collect::<Vec<_>>(),
+            [true, true, true, true, false, false]
+        );
+        assert!(!term(1.0, WeightSchedule::RampUp { steps: 4 }).is_fading(0));
+    }
 }

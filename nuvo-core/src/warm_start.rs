@@ -32,8 +32,13 @@
 
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use nuvo_autodiff::{Tensor, Var};
-use nuvo_losses::StepContext;
+use nuvo_geometry::GeometrySource;
+use nuvo_losses::{ChartRows, Loss, LossError, Samples, StepContext};
 use serde::{Deserialize, Serialize};
+
+use crate::batch::{ShortBatch, surface_samples};
+use crate::config::ExperimentConfig;
+use crate::seeds::{Stream, derive};
 
 /// `[warm_start]`: the projection prior (see the module docs). Absent or `steps = 0`: off.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -76,11 +81,6 @@ impl WarmStartConfig {
     /// Whether the warm start runs at all.
     pub fn enabled(&self) -> bool {
         self.steps > 0
-    }
-
-    /// The prior's weight at 0-based `step`: `weight · (1 − step / steps)`, 0 from `steps` on.
-    pub fn weight_at(&self, step: u64) -> f32 {
-        if step >= self.steps { 0.0 } else { self.weight * (1.0 - step as f32 / self.steps as f32) }
     }
 }
 
@@ -193,7 +193,35 @@ const KMEANS_ROUNDS: usize = 10;
 /// equal-area map starts to blow up towards the antipode.
 const AZIMUTHAL_REACH: f32 = 0.2;
 
+/// The prior as a term of the objective: the trainer adds it with a weight fading out over
+/// `warm_start.steps` (`crate::trainer::WeightSchedule::FadeOut`).
+impl Loss for ProjectionPrior {
+    fn evaluate(&self, ctx: &mut StepContext<'_>) -> Result<Var, LossError> {
+        Ok(self.record(ctx))
+    }
+}
+
 impl ProjectionPrior {
+    /// The prior `config`'s `[warm_start]` asks for (`None` when it is off), fitted to a sample of
+    /// `source` drawn from the run's seed, so a resumed run fits the same one.
+    pub fn for_run(
+        config: &ExperimentConfig,
+        source: &dyn GeometrySource,
+    ) -> Result<Option<Self>, ShortBatch> {
+        let Some(cfg) = config.warm_start.as_ref().filter(|w| w.enabled()) else {
+            return Ok(None);
+        };
+        let sample = surface_samples(source, cfg.samples, derive(config.seed, 0, Stream::WarmStart))?;
+        Ok(Some(ProjectionPrior::fit(
+            &sample.points,
+            &sample.normals,
+            config.model.charts,
+            cfg.projection,
+            cfg.min_alignment,
+            cfg.occlusion,
+        )))
+    }
+
     /// Fits `charts` maps to surface samples (model frame) and their unit normals; with
     /// `occlusion` (orthographic maps only), also each chart's depth map of the samples.
     /// Deterministic; `points` and `normals` must have equal lengths.
@@ -342,7 +370,7 @@ impl ProjectionPrior {
 
     /// Records `L_warm` (module docs) for the step's batch on the context's tape, reusing its
     /// shared chart logits and texture coordinates.
-    pub fn evaluate(&self, ctx: &mut StepContext<'_>) -> Var {
+    fn record(&self, ctx: &mut StepContext<'_>) -> Var {
         let n = self.frames.len();
         let (points, normals) = (ctx.data().points, ctx.data().normals);
         let b = points.len();
@@ -361,7 +389,7 @@ impl ProjectionPrior {
         let logits = ctx.chart_logits();
         let mut per_chart = Vec::with_capacity(n);
         for i in 0..n {
-            let t = ctx.tex(i);
+            let t = ctx.tex(ChartRows::new(i, Samples::All));
             let tape = &mut *ctx.tape;
             let target = tape.input(&targets[i]);
             let d = tape.sub(t, target);
@@ -656,10 +684,7 @@ mod tests {
     }
 
     #[test]
-    fn the_weight_falls_linearly_to_zero() {
-        let cfg = WarmStartConfig { steps: 4, weight: 8.0, ..WarmStartConfig::default() };
-        let w: Vec<f32> = (0..6).map(|s| cfg.weight_at(s)).collect();
-        assert_eq!(w, vec![8.0, 6.0, 4.0, 2.0, 0.0, 0.0]);
+    fn it_is_off_by_default() {
         assert!(!WarmStartConfig::default().enabled());
     }
 }

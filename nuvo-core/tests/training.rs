@@ -5,10 +5,11 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use nuvo_autodiff::{Shape, Var};
 use nuvo_core::config::{self, LoadedConfig};
 use nuvo_core::run::{RunOptions, Silent, files, run};
+use nuvo_core::warm_start::ProjectionPrior;
 use nuvo_core::{Checkpoint, TrainError, Trainer};
 use nuvo_geometry::SourceRegistry;
 use nuvo_geometry::testdata::sphere_sources as sources;
-use nuvo_losses::{Loss, LossError, LossInfo, LossRegistry, StepContext};
+use nuvo_losses::{Loss, LossError, LossInfo, LossRegistry, RegisteredLoss, StepContext};
 
 const SMALL: &str = r#"
 seed = 7
@@ -180,20 +181,26 @@ impl Loss for NanOnCalls {
     }
 }
 
+/// The calls on which the next [`NanOnCalls`] built returns NaN.
+static NAN_FROM: AtomicU64 = AtomicU64::new(0);
+static NAN_TO: AtomicU64 = AtomicU64::new(0);
+
+impl RegisteredLoss for NanOnCalls {
+    const INFO: LossInfo = LossInfo { name: "nan_probe", summary: "test", default_weight: 1.0, options: &[] };
+    fn from_options(_: &toml::Table) -> Result<Self, LossError> {
+        Ok(NanOnCalls {
+            calls: AtomicU64::new(0),
+            from: NAN_FROM.load(Ordering::SeqCst),
+            to: NAN_TO.load(Ordering::SeqCst),
+        })
+    }
+}
+
 fn registry_with_nan(from: u64, to: u64) -> LossRegistry {
     let mut r = LossRegistry::with_builtins();
-    static FROM: AtomicU64 = AtomicU64::new(0);
-    static TO: AtomicU64 = AtomicU64::new(0);
-    FROM.store(from, Ordering::SeqCst);
-    TO.store(to, Ordering::SeqCst);
-    fn build(_: &toml::Table) -> Result<Box<dyn Loss>, LossError> {
-        Ok(Box::new(NanOnCalls {
-            calls: AtomicU64::new(0),
-            from: FROM.load(Ordering::SeqCst),
-            to: TO.load(Ordering::SeqCst),
-        }))
-    }
-    r.register(LossInfo { name: "nan_probe", summary: "test", default_weight: 1.0, options: &[] }, build);
+    NAN_FROM.store(from, Ordering::SeqCst);
+    NAN_TO.store(to, Ordering::SeqCst);
+    r.add::<NanOnCalls>();
     r
 }
 
@@ -368,7 +375,9 @@ fn agreement_with_the_projection_prior(warm_start: &str, steps: usize) -> (f32, 
     };
     // The same seed fits the same prior, so this one shows what the trained runs were pulled to.
     let reference = six_charts("[warm_start]\nsteps = 1\n");
-    let prior = reference.warm_start().expect("warm start enabled").clone();
+    let prior = ProjectionPrior::for_run(reference.config(), reference.source())
+        .unwrap()
+        .expect("warm start enabled");
     let mut t = six_charts(&format!("[losses.cycle_3d]\n{warm_start}"));
     for _ in 0..steps {
         t.step().unwrap();
@@ -552,4 +561,16 @@ fn a_resumed_run_settles_where_an_uninterrupted_one_does() {
         Checkpoint::load(&out.join(files::CHECKPOINT)).unwrap(),
         Checkpoint::load(&dir.path().join("full").join(files::CHECKPOINT)).unwrap()
     );
+}
+
+#[test]
+fn a_config_without_losses_trains_the_papers_eight_and_no_loss_registered_later() {
+    let mut registry = LossRegistry::with_builtins();
+    registry.add::<NanOnCalls>();
+    let t = Trainer::new(&small(""), &sources(), &registry).unwrap();
+    let names: Vec<&str> = t.terms().iter().map(|t| t.name.as_str()).collect();
+    assert_eq!(names, nuvo_losses::builtin::PAPER);
+    // Listed, it is built like any other.
+    let t = Trainer::new(&small("[losses.nan_probe]\n"), &sources(), &registry).unwrap();
+    assert_eq!(t.terms().iter().map(|t| t.name.as_str()).collect::<Vec<_>>(), ["nan_probe"]);
 }

@@ -2,28 +2,30 @@
 
 use nuvo_autodiff::{Shape, Var};
 
-use crate::context::{Samples, StepContext};
+use crate::context::{ChartRows, Samples, StepContext};
 use crate::loss::{Loss, LossError, chart_weighted_mean, squared_distance};
-use crate::registry::{LossInfo, no_options};
-
-pub(super) const INFO: LossInfo = LossInfo {
-    name: "cluster",
-    summary: "c(x)-weighted squared distance from each sample to its charts' probability-weighted centroids",
-    default_weight: 0.5,
-    options: &[],
-};
+use crate::registry::{LossInfo, RegisteredLoss, no_options};
 
 /// `L_cluster = (1/|G|) Σ_x Σ_i c(x)[i] ‖μ_i − x‖²` with `μ_i = Σ_x c(x)[i]·x / Σ_x c(x)[i]` over the
 /// batch. Gradients flow through the centroids too, as in the paper's formula.
 pub struct Cluster;
 
-pub(super) fn build(options: &toml::Table) -> Result<Box<dyn Loss>, LossError> {
-    no_options(INFO.name, options)?;
-    Ok(Box::new(Cluster))
-}
-
 /// Keeps a chart that has lost every point from dividing by zero.
 const MASS_FLOOR: f32 = 1e-6;
+
+impl RegisteredLoss for Cluster {
+    const INFO: LossInfo = LossInfo {
+        name: "cluster",
+        summary: "c(x)-weighted squared distance from each sample to its charts' probability-weighted centroids",
+        default_weight: 0.5,
+        options: &[],
+    };
+
+    fn from_options(options: &toml::Table) -> Result<Self, LossError> {
+        no_options(Self::INFO.name, options)?;
+        Ok(Cluster)
+    }
+}
 
 impl Loss for Cluster {
     fn evaluate(&self, ctx: &mut StepContext<'_>) -> Result<Var, LossError> {
@@ -36,13 +38,13 @@ impl Loss for Cluster {
         let mass = t.matmul_t(c, ones, true, false); // n×1
         let mass = t.add_scalar(mass, MASS_FLOOR);
         let centroids = t.div(weighted_sums, mass);
-        let per_chart: Vec<Var> = (0..ctx.charts())
+        let per_chart: Vec<(ChartRows, Var)> = (0..ctx.charts())
             .map(|i| {
                 let mu = ctx.tape.slice_rows(centroids, i, 1);
-                squared_distance(ctx, x, mu)
+                (ChartRows::new(i, Samples::All), squared_distance(ctx, x, mu))
             })
             .collect();
-        Ok(chart_weighted_mean(ctx, &per_chart, Samples::All))
+        Ok(chart_weighted_mean(ctx, &per_chart))
     }
 }
 

@@ -2,23 +2,9 @@
 
 use nuvo_autodiff::Var;
 
-use crate::context::{Samples, StepContext};
+use crate::context::{ChartRows, Samples, StepContext};
 use crate::loss::{Loss, LossError, chart_weighted_mean, squared_distance};
-use crate::registry::{LossInfo, no_options};
-
-pub(super) const CYCLE_3D: LossInfo = LossInfo {
-    name: "cycle_3d",
-    summary: "3→2→3 cycle: c(x)-weighted squared distance between s_i(t_i(x)) and x (injectivity)",
-    default_weight: 1.0,
-    options: &[],
-};
-
-pub(super) const CYCLE_2D: LossInfo = LossInfo {
-    name: "cycle_2d",
-    summary: "2→3→2 cycle: squared distance between t_i(s_i(u)) and u, every chart (surjectivity)",
-    default_weight: 1.0,
-    options: &[],
-};
+use crate::registry::{LossInfo, RegisteredLoss, no_options};
 
 /// `L_{3→2→3} = (1/|G|) Σ_x Σ_i c(x)[i] ‖s_i(t_i(x)) − x‖²`.
 pub struct Cycle3d;
@@ -26,27 +12,46 @@ pub struct Cycle3d;
 /// `L_{2→3→2} = (1/|T|) Σ_u Σ_i ‖t_i(s_i(u)) − u‖²`.
 pub struct Cycle2d;
 
-pub(super) fn build_3d(options: &toml::Table) -> Result<Box<dyn Loss>, LossError> {
-    no_options(CYCLE_3D.name, options)?;
-    Ok(Box::new(Cycle3d))
-}
+impl RegisteredLoss for Cycle3d {
+    const INFO: LossInfo = LossInfo {
+        name: "cycle_3d",
+        summary: "3→2→3 cycle: c(x)-weighted squared distance between s_i(t_i(x)) and x (injectivity)",
+        default_weight: 1.0,
+        options: &[],
+    };
 
-pub(super) fn build_2d(options: &toml::Table) -> Result<Box<dyn Loss>, LossError> {
-    no_options(CYCLE_2D.name, options)?;
-    Ok(Box::new(Cycle2d))
+    fn from_options(options: &toml::Table) -> Result<Self, LossError> {
+        no_options(Self::INFO.name, options)?;
+        Ok(Cycle3d)
+    }
 }
 
 impl Loss for Cycle3d {
     fn evaluate(&self, ctx: &mut StepContext<'_>) -> Result<Var, LossError> {
         let x = ctx.x();
-        let per_chart: Vec<Var> = (0..ctx.charts())
+        let per_chart: Vec<(ChartRows, Var)> = (0..ctx.charts())
             .map(|i| {
-                let back = ctx.support_cycle_points(i);
-                let x = ctx.on_support(i, x);
-                squared_distance(ctx, back, x)
+                let rows = ChartRows::new(i, Samples::Support);
+                let back = ctx.cycle_points(rows);
+                let x = ctx.select(rows, x);
+                (rows, squared_distance(ctx, back, x))
             })
             .collect();
-        Ok(chart_weighted_mean(ctx, &per_chart, Samples::Support))
+        Ok(chart_weighted_mean(ctx, &per_chart))
+    }
+}
+
+impl RegisteredLoss for Cycle2d {
+    const INFO: LossInfo = LossInfo {
+        name: "cycle_2d",
+        summary: "2→3→2 cycle: squared distance between t_i(s_i(u)) and u, every chart (surjectivity)",
+        default_weight: 1.0,
+        options: &[],
+    };
+
+    fn from_options(options: &toml::Table) -> Result<Self, LossError> {
+        no_options(Self::INFO.name, options)?;
+        Ok(Cycle2d)
     }
 }
 

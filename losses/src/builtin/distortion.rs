@@ -4,44 +4,9 @@
 use nuvo_autodiff::Var;
 use serde::Deserialize;
 
-use crate::context::{Samples, StepContext};
+use crate::context::{ChartRows, Samples, StepContext};
 use crate::loss::{Loss, LossError, chart_weighted_mean};
-use crate::registry::{LossInfo, OptionDoc, no_options, parse_options};
-
-pub(super) const CONFORMAL: LossInfo = LossInfo {
-    name: "conformal",
-    summary: "c(x)-weighted squared cosine between the UV images of two orthogonal tangent vectors",
-    default_weight: 0.4,
-    options: &[],
-};
-
-pub(super) const STRETCH: LossInfo = LossInfo {
-    name: "stretch",
-    summary: "c(x)-weighted squared difference between the UV parallelogram area and the learned σ",
-    default_weight: 0.1,
-    options: &[
-        OptionDoc {
-            name: "area",
-            default: "\"paper\"",
-            doc: "\"paper\": the area spanned by D t(εp), D t(εq) as in the paper (∝ ε²); \
-                  \"jacobian\": that area / ε², the local UV area per unit surface area, independent of ε",
-        },
-        OptionDoc {
-            name: "signed",
-            default: "false",
-            doc: "use the signed area (positive when the UV image keeps the orientation of (p, q, n)), so \
-                  mirrored (folded) regions cost ≈ 4σ²; an extension of the paper, which uses |area|",
-        },
-        OptionDoc {
-            name: "relative",
-            default: "false",
-            doc: "score the spread of the area relative to its size, 1 − E[A]²/E[A²] (= min over σ of \
-                  E[(A/σ − 1)²]), instead of (A − σ)²: invariant to the charts' overall size, so it does \
-                  not reward shrinking them as the paper's form does; σ is then unused. An extension of \
-                  the paper",
-        },
-    ],
-};
+use crate::registry::{LossInfo, OptionDoc, RegisteredLoss, no_options, parse_options};
 
 /// `L_conformal = (1/|G|) Σ_x Σ_i c(x)[i] · cos²(D t_i(εp), D t_i(εq))`.
 pub struct Conformal;
@@ -84,23 +49,29 @@ pub enum AreaScale {
     Jacobian,
 }
 
-pub(super) fn build_conformal(options: &toml::Table) -> Result<Box<dyn Loss>, LossError> {
-    no_options(CONFORMAL.name, options)?;
-    Ok(Box::new(Conformal))
-}
-
-pub(super) fn build_stretch(options: &toml::Table) -> Result<Box<dyn Loss>, LossError> {
-    Ok(Box::new(Stretch { options: parse_options(STRETCH.name, options)? }))
-}
-
 /// Keeps the cosine finite when a mapping collapses a tangent vector to zero.
 const COSINE_FLOOR: f32 = 1e-20;
 
+impl RegisteredLoss for Conformal {
+    const INFO: LossInfo = LossInfo {
+        name: "conformal",
+        summary: "c(x)-weighted squared cosine between the UV images of two orthogonal tangent vectors",
+        default_weight: 0.4,
+        options: &[],
+    };
+
+    fn from_options(options: &toml::Table) -> Result<Self, LossError> {
+        no_options(Self::INFO.name, options)?;
+        Ok(Conformal)
+    }
+}
+
 impl Loss for Conformal {
     fn evaluate(&self, ctx: &mut StepContext<'_>) -> Result<Var, LossError> {
-        let per_chart: Vec<Var> = (0..ctx.charts())
+        let per_chart: Vec<(ChartRows, Var)> = (0..ctx.charts())
             .map(|i| {
-                let (a, b) = ctx.support_uv_differentials(i);
+                let rows = ChartRows::new(i, Samples::DistortionSupport);
+                let (a, b) = ctx.uv_differentials(rows);
                 let t = &mut *ctx.tape;
                 let ab = t.mul(a, b);
                 let dot = t.sum_each_row(ab);
@@ -111,10 +82,10 @@ impl Loss for Conformal {
                 let dot2 = t.square(dot);
                 let norms = t.mul(na, nb);
                 let norms = t.add_scalar(norms, COSINE_FLOOR);
-                t.div(dot2, norms)
+                (rows, t.div(dot2, norms))
             })
             .collect();
-        Ok(chart_weighted_mean(ctx, &per_chart, Samples::DistortionSupport))
+        Ok(chart_weighted_mean(ctx, &per_chart))
     }
 }
 
@@ -136,15 +107,18 @@ impl Stretch {
         Stretch { options }
     }
 
-    /// Chart `i`'s parallelogram areas (`B×1`) in the units `options.area` asks for.
-    fn areas(&self, ctx: &mut StepContext<'_>, i: usize) -> Var {
+    /// Chart `i`'s parallelogram areas (a column over the distortion samples of its support) in
+    /// the units `options.area` asks for.
+    fn areas(&self, ctx: &mut StepContext<'_>, i: usize) -> (ChartRows, Var) {
         let eps = ctx.data().epsilon;
-        let (a, b) = ctx.support_uv_differentials(i);
+        let rows = ChartRows::new(i, Samples::DistortionSupport);
+        let (a, b) = ctx.uv_differentials(rows);
         let area = parallelogram_area(ctx, a, b, self.options.signed);
-        match self.options.area {
+        let area = match self.options.area {
             AreaScale::Paper => area,
             AreaScale::Jacobian => ctx.tape.scale(area, 1.0 / (eps * eps)),
-        }
+        };
+        (rows, area)
     }
 }
 
@@ -152,10 +126,10 @@ impl Stretch {
 const SECOND_MOMENT_FLOOR: f32 = 1e-30;
 
 /// `1 − E[A]²/(E[A²] + floor)` with `c(x)`-weighted expectations over the charts' areas.
-fn relative_spread(ctx: &mut StepContext<'_>, areas: &[Var]) -> Var {
-    let squares: Vec<Var> = areas.iter().map(|&a| ctx.tape.square(a)).collect();
-    let mean = chart_weighted_mean(ctx, areas, Samples::DistortionSupport);
-    let mean_square = chart_weighted_mean(ctx, &squares, Samples::DistortionSupport);
+fn relative_spread(ctx: &mut StepContext<'_>, areas: &[(ChartRows, Var)]) -> Var {
+    let squares: Vec<(ChartRows, Var)> = areas.iter().map(|&(r, a)| (r, ctx.tape.square(a))).collect();
+    let mean = chart_weighted_mean(ctx, areas);
+    let mean_square = chart_weighted_mean(ctx, &squares);
     let t = &mut *ctx.tape;
     let mean2 = t.square(mean);
     let denominator = t.add_scalar(mean_square, SECOND_MOMENT_FLOOR);
@@ -164,21 +138,55 @@ fn relative_spread(ctx: &mut StepContext<'_>, areas: &[Var]) -> Var {
     t.add_scalar(negated, 1.0)
 }
 
+impl RegisteredLoss for Stretch {
+    const INFO: LossInfo = LossInfo {
+        name: "stretch",
+        summary: "c(x)-weighted squared difference between the UV parallelogram area and the learned σ",
+        default_weight: 0.1,
+        options: &[
+            OptionDoc {
+                name: "area",
+                default: "\"paper\"",
+                doc: "\"paper\": the area spanned by D t(εp), D t(εq) as in the paper (∝ ε²); \
+                      \"jacobian\": that area / ε², the local UV area per unit surface area, independent of ε",
+            },
+            OptionDoc {
+                name: "signed",
+                default: "false",
+                doc: "use the signed area (positive when the UV image keeps the orientation of (p, q, n)), so \
+                      mirrored (folded) regions cost ≈ 4σ²; an extension of the paper, which uses |area|",
+            },
+            OptionDoc {
+                name: "relative",
+                default: "false",
+                doc: "score the spread of the area relative to its size, 1 − E[A]²/E[A²] (= min over σ of \
+                      E[(A/σ − 1)²]), instead of (A − σ)²: invariant to the charts' overall size, so it does \
+                      not reward shrinking them as the paper's form does; σ is then unused. An extension of \
+                      the paper",
+            },
+        ],
+    };
+
+    fn from_options(options: &toml::Table) -> Result<Self, LossError> {
+        Ok(Stretch { options: parse_options(Self::INFO.name, options)? })
+    }
+}
+
 impl Loss for Stretch {
     fn evaluate(&self, ctx: &mut StepContext<'_>) -> Result<Var, LossError> {
-        let areas: Vec<Var> = (0..ctx.charts()).map(|i| self.areas(ctx, i)).collect();
+        let areas: Vec<(ChartRows, Var)> = (0..ctx.charts()).map(|i| self.areas(ctx, i)).collect();
         if self.options.relative {
             return Ok(relative_spread(ctx, &areas));
         }
         let sigma = ctx.sigma();
-        let per_chart: Vec<Var> = areas
+        let per_chart: Vec<(ChartRows, Var)> = areas
             .iter()
-            .map(|&area| {
+            .map(|&(rows, area)| {
                 let d = ctx.tape.sub(area, sigma);
-                ctx.tape.square(d)
+                (rows, ctx.tape.square(d))
             })
             .collect();
-        Ok(chart_weighted_mean(ctx, &per_chart, Samples::DistortionSupport))
+        Ok(chart_weighted_mean(ctx, &per_chart))
     }
 }
 
@@ -290,12 +298,12 @@ mod tests {
     #[test]
     fn stretch_options_are_checked() {
         let ok: toml::Table = toml::from_str("area = \"jacobian\"").unwrap();
-        assert!(build_stretch(&ok).is_ok());
+        assert!(Stretch::from_options(&ok).is_ok());
         let typo: toml::Table = toml::from_str("aera = \"jacobian\"").unwrap();
-        let e = build_stretch(&typo).err().unwrap().to_string();
+        let e = Stretch::from_options(&typo).err().unwrap().to_string();
         assert!(e.contains("aera") && e.contains("area"), "{e}");
         let bad: toml::Table = toml::from_str("area = \"huge\"").unwrap();
-        let e = build_stretch(&bad).err().unwrap().to_string();
+        let e = Stretch::from_options(&bad).err().unwrap().to_string();
         assert!(e.contains("huge") && e.contains("paper"), "{e}");
     }
 

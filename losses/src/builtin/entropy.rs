@@ -4,22 +4,24 @@ use nuvo_autodiff::{Shape, Var};
 
 use crate::context::StepContext;
 use crate::loss::{Loss, LossError};
-use crate::registry::{LossInfo, no_options};
-
-pub(super) const INFO: LossInfo = LossInfo {
-    name: "entropy",
-    summary: "chart-assignment cross-entropy: −log c(s_i(u))[i], so chart i's surface claims chart i",
-    default_weight: 0.04,
-    options: &[],
-};
+use crate::registry::{LossInfo, RegisteredLoss, no_options};
 
 /// `L_entropy = −(1/|T|) Σ_u Σ_i log c(s_i(u))[i]`, from one chart-network evaluation on all charts'
 /// surface points (log-softmax, so no epsilon is needed inside the log).
 pub struct Entropy;
 
-pub(super) fn build(options: &toml::Table) -> Result<Box<dyn Loss>, LossError> {
-    no_options(INFO.name, options)?;
-    Ok(Box::new(Entropy))
+impl RegisteredLoss for Entropy {
+    const INFO: LossInfo = LossInfo {
+        name: "entropy",
+        summary: "chart-assignment cross-entropy: −log c(s_i(u))[i], so chart i's surface claims chart i",
+        default_weight: 0.04,
+        options: &[],
+    };
+
+    fn from_options(options: &toml::Table) -> Result<Self, LossError> {
+        no_options(Self::INFO.name, options)?;
+        Ok(Entropy)
+    }
 }
 
 impl Loss for Entropy {

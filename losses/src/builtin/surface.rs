@@ -6,24 +6,12 @@ use rayon::prelude::*;
 
 use crate::context::StepContext;
 use crate::loss::{Loss, LossError, squared_distance};
-use crate::registry::{LossInfo, no_options};
-
-pub(super) const INFO: LossInfo = LossInfo {
-    name: "surface",
-    summary: "symmetric Chamfer distance between ⋃_i s_i(T) and the surface samples (kd-tree nearest neighbours)",
-    default_weight: 10.0,
-    options: &[],
-};
+use crate::registry::{LossInfo, RegisteredLoss, no_options};
 
 /// `L_surface = (1/|G|) Σ_x min_{x'∈S} ‖x' − x‖² + (1/|S|) Σ_{x'∈S} min_x ‖x' − x‖²` with
 /// `S = ⋃_i s_i(T)`. Nearest neighbours are found in kd-trees (kiddo) built from this step's values;
 /// the gradient flows through the chosen pairs (the argmin itself is piecewise constant).
 pub struct Surface;
-
-pub(super) fn build(options: &toml::Table) -> Result<Box<dyn Loss>, LossError> {
-    no_options(INFO.name, options)?;
-    Ok(Box::new(Surface))
-}
 
 /// For every query point, the index of its nearest neighbour among `points`.
 fn nearest_indices(points: &[[f32; 3]], queries: &[[f32; 3]]) -> Vec<u32> {
@@ -35,6 +23,20 @@ fn as_points(values: &[f32]) -> Vec<[f32; 3]> {
     values.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
 }
 
+impl RegisteredLoss for Surface {
+    const INFO: LossInfo = LossInfo {
+        name: "surface",
+        summary: "symmetric Chamfer distance between ⋃_i s_i(T) and the surface samples (kd-tree nearest neighbours)",
+        default_weight: 10.0,
+        options: &[],
+    };
+
+    fn from_options(options: &toml::Table) -> Result<Self, LossError> {
+        no_options(Self::INFO.name, options)?;
+        Ok(Surface)
+    }
+}
+
 impl Loss for Surface {
     fn evaluate(&self, ctx: &mut StepContext<'_>) -> Result<Var, LossError> {
         let s = ctx.all_surface_points();
@@ -42,7 +44,10 @@ impl Loss for Surface {
         let s_points = as_points(ctx.tape.value(s));
         let x_points = ctx.data().points;
         if s_points.is_empty() || x_points.is_empty() {
-            return Err(LossError::Evaluation { loss: INFO.name.into(), message: "empty batch".into() });
+            return Err(LossError::Evaluation {
+                loss: Surface::INFO.name.into(),
+                message: "empty batch".into(),
+            });
         }
         let nearest_s = nearest_indices(&s_points, x_points);
         let nearest_x = nearest_indices(x_points, &s_points);

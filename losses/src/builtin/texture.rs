@@ -2,39 +2,42 @@
 
 use nuvo_autodiff::Var;
 
-use crate::context::{Samples, StepContext};
+use crate::context::{ChartRows, Samples, StepContext};
 use crate::loss::{Loss, LossError, chart_weighted_mean, squared_distance};
-use crate::registry::{LossInfo, no_options};
-
-pub(super) const INFO: LossInfo = LossInfo {
-    name: "texture",
-    summary: "c(x)-weighted squared error of the normal grid N_i looked up at t_i(x) against n(x) (injectivity)",
-    default_weight: 0.1,
-    options: &[],
-};
+use crate::registry::{LossInfo, RegisteredLoss, no_options};
 
 /// `L_texture = (1/|G|) Σ_x Σ_i c(x)[i] ‖N_i(t_i(x)) − n(x)‖²`, with bilinear lookup; gradients reach
 /// both the grid values and the texture coordinates.
 pub struct Texture;
 
-pub(super) fn build(options: &toml::Table) -> Result<Box<dyn Loss>, LossError> {
-    no_options(INFO.name, options)?;
-    Ok(Box::new(Texture))
+impl RegisteredLoss for Texture {
+    const INFO: LossInfo = LossInfo {
+        name: "texture",
+        summary: "c(x)-weighted squared error of the normal grid N_i looked up at t_i(x) against n(x) (injectivity)",
+        default_weight: 0.1,
+        options: &[],
+    };
+
+    fn from_options(options: &toml::Table) -> Result<Self, LossError> {
+        no_options(Self::INFO.name, options)?;
+        Ok(Texture)
+    }
 }
 
 impl Loss for Texture {
     fn evaluate(&self, ctx: &mut StepContext<'_>) -> Result<Var, LossError> {
         let normals = ctx.normals();
-        let per_chart: Vec<Var> = (0..ctx.charts())
+        let per_chart: Vec<(ChartRows, Var)> = (0..ctx.charts())
             .map(|i| {
-                let uv = ctx.support_tex(i);
+                let rows = ChartRows::new(i, Samples::Support);
+                let uv = ctx.tex(rows);
                 let (grid, res) = ctx.normal_grid(i);
                 let predicted = ctx.tape.grid_sample(grid, uv, res);
-                let normals = ctx.on_support(i, normals);
-                squared_distance(ctx, predicted, normals)
+                let normals = ctx.select(rows, normals);
+                (rows, squared_distance(ctx, predicted, normals))
             })
             .collect();
-        Ok(chart_weighted_mean(ctx, &per_chart, Samples::Support))
+        Ok(chart_weighted_mean(ctx, &per_chart))
     }
 }
 

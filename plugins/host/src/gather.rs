@@ -2,7 +2,7 @@
 //! [`StepContext`] and laid out exactly as the ABI describes (see [`Quantity`]).
 
 use nuvo_autodiff::Var;
-use nuvo_losses::StepContext;
+use nuvo_losses::{ChartRows, Samples, StepContext};
 use nuvo_plugin_api::abi::SLOTS;
 use nuvo_plugin_api::{Dims, Quantities, Quantity};
 
@@ -28,13 +28,13 @@ fn quantity(ctx: &mut StepContext<'_>, q: Quantity) -> Var {
         Quantity::Normals => ctx.normals(),
         Quantity::Uv => ctx.uv(),
         Quantity::ChartProbs => ctx.chart_probs(),
-        Quantity::Tex => per_chart(ctx, |c, i| c.tex(i)),
+        Quantity::Tex => per_chart(ctx, |c, i| c.tex(ChartRows::new(i, Samples::All))),
         Quantity::UvDifferentials => per_chart(ctx, |c, i| {
-            let (dp, dq) = c.uv_differentials(i);
+            let (dp, dq) = c.uv_differentials(ChartRows::new(i, Samples::Distortion));
             c.tape.concat_cols(&[dp, dq])
         }),
         Quantity::SurfacePoints => ctx.all_surface_points(),
-        Quantity::CyclePoints => per_chart(ctx, |c, i| c.cycle_points(i)),
+        Quantity::CyclePoints => per_chart(ctx, |c, i| c.cycle_points(ChartRows::new(i, Samples::All))),
         Quantity::CycleUv => per_chart(ctx, |c, i| c.cycle_uv(i)),
         Quantity::Sigma => ctx.sigma(),
     }
