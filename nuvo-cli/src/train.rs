@@ -7,8 +7,9 @@ use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use nuvo_core::outputs::{OutputReport, write_outputs};
 use nuvo_core::run::{Observer, RunOptions, files, run};
-use nuvo_core::{Checkpoint, LoadedConfig, StepOutcome, Trainer, config};
-use nuvo_geometry::SourceRegistry;
+use nuvo_core::trainer::build_source;
+use nuvo_core::{Checkpoint, LoadedConfig, StepOutcome, TrainedAtlas, Trainer, config};
+use nuvo_geometry::{GeometrySource, SourceRegistry};
 use nuvo_losses::LossRegistry;
 
 #[derive(clap::Args)]
@@ -72,18 +73,49 @@ pub fn train(args: &TrainArgs) -> anyhow::Result<()> {
     if args.no_bake || !loaded.config.output.bake {
         return Ok(());
     }
-    bake_into(&mut trainer, &out_dir, &loaded)?;
+    bake_into_report(&mut trainer.atlas(), Some(trainer.source()), &out_dir, &loaded)?;
     if let Some(k) = crate::peak_rss_kib() {
         println!("peak RSS {} MB over the whole run", k / 1024);
     }
     Ok(())
 }
 
+/// Bakes a run from its checkpoint alone: the networks and the frame come from the checkpoint, the
+/// geometry to bake onto from its stored config (not read at all with `output.bake_mesh`); no
+/// losses, plugins or optimiser are built, so a run whose loss plugin is gone still bakes.
 pub fn bake(args: &BakeArgs) -> anyhow::Result<()> {
-    let (mut trainer, loaded, ckpt_path) = restore_run(&args.run, &args.set)?;
+    let (ckpt, loaded, ckpt_path) = load_run(&args.run, &args.set)?;
+    let mut atlas = TrainedAtlas::from_checkpoint(&ckpt, &loaded.config)
+        .with_context(|| format!("the checkpoint {}", ckpt_path.display()))?;
+    println!(
+        "atlas: {} chart(s) after {} steps, from {}",
+        atlas.charts(),
+        atlas.steps(),
+        ckpt_path.display()
+    );
+    let scene = match loaded.config.output.bake_mesh {
+        Some(_) => None,
+        None => {
+            let started = Instant::now();
+            let source = build_source(&loaded, &SourceRegistry::with_builtins())?;
+            println!("geometry: {} (ready in {:.1} s)", source.describe(), started.elapsed().as_secs_f64());
+            Some(source)
+        }
+    };
     let out =
         args.out.clone().unwrap_or_else(|| ckpt_path.parent().map(Path::to_path_buf).unwrap_or_default());
-    bake_into(&mut trainer, &out, &loaded)
+    bake_into_report(&mut atlas, scene.as_deref(), &out, &loaded).map(drop)
+}
+
+/// A run's checkpoint (the run folder's, or the file itself), the config stored in it with
+/// `overrides` applied, and the checkpoint's path.
+fn load_run(run: &Path, overrides: &[String]) -> anyhow::Result<(Checkpoint, LoadedConfig, PathBuf)> {
+    let ckpt_path = if run.is_dir() { run.join(files::CHECKPOINT) } else { run.to_path_buf() };
+    let ckpt = Checkpoint::load(&ckpt_path)?;
+    let loaded =
+        config::from_str_with_overrides(&ckpt_path.display().to_string(), &ckpt.config_toml, overrides)
+            .with_context(|| format!("the config stored in {}", ckpt_path.display()))?;
+    Ok((ckpt, loaded, ckpt_path))
 }
 
 /// The trainer of a run (its folder or checkpoint file) as its checkpoint left it, built from the
@@ -91,12 +123,8 @@ pub fn bake(args: &BakeArgs) -> anyhow::Result<()> {
 pub(crate) fn restore_run(
     run: &Path,
     overrides: &[String],
-) -> anyhow::Result<(Trainer, LoadedConfig, std::path::PathBuf)> {
-    let ckpt_path = if run.is_dir() { run.join(files::CHECKPOINT) } else { run.to_path_buf() };
-    let ckpt = Checkpoint::load(&ckpt_path)?;
-    let loaded =
-        config::from_str_with_overrides(&ckpt_path.display().to_string(), &ckpt.config_toml, overrides)
-            .with_context(|| format!("the config stored in {}", ckpt_path.display()))?;
+) -> anyhow::Result<(Trainer, LoadedConfig, PathBuf)> {
+    let (ckpt, loaded, ckpt_path) = load_run(run, overrides)?;
     let mut trainer = build_trainer(&loaded)?;
     trainer.restore(&ckpt)?;
     Ok((trainer, loaded, ckpt_path))
@@ -132,18 +160,16 @@ fn build_trainer(loaded: &LoadedConfig) -> anyhow::Result<Trainer> {
     Ok(trainer)
 }
 
-fn bake_into(trainer: &mut Trainer, out: &Path, loaded: &LoadedConfig) -> anyhow::Result<()> {
-    bake_into_report(trainer, out, loaded).map(drop)
-}
-
-/// Bakes, exports, draws and measures into `out`, prints what was written, and returns the report.
+/// Bakes, exports, draws and measures `atlas` into `out`, prints what was written, and returns the
+/// report. `scene` is the geometry it was trained on (see [`write_outputs`]).
 pub(crate) fn bake_into_report(
-    trainer: &mut Trainer,
+    atlas: &mut TrainedAtlas,
+    scene: Option<&dyn GeometrySource>,
     out: &Path,
     loaded: &LoadedConfig,
 ) -> anyhow::Result<OutputReport> {
     let started = Instant::now();
-    let report = write_outputs(trainer, out, &loaded.config.output)?;
+    let report = write_outputs(atlas, scene, out, &loaded.config.output)?;
     print_report(&report, started.elapsed().as_secs_f64());
     Ok(report)
 }

@@ -228,7 +228,7 @@ pub fn run_unwrap(args: &UnwrapArgs) -> anyhow::Result<()> {
     let why = if summary.settled { " (the atlas had settled)" } else { "" };
     println!("trained {} steps in {:.1} s{why}", summary.steps, summary.seconds);
     let t = Instant::now();
-    let report = bake_into_report(&mut trainer, &out, &loaded)?;
+    let report = bake_into_report(&mut trainer.atlas(), Some(trainer.source()), &out, &loaded)?;
     if is_gltf(&input)
         && let Some(uv) = &report.baked_uv
     {

@@ -142,6 +142,54 @@ fn bake_redoes_the_outputs_from_a_run_folder() {
 }
 
 #[test]
+fn bake_needs_the_checkpoint_and_the_geometry_but_not_the_loss_plugins() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = tiny_config(dir.path(), 4, 2);
+    let run_dir = dir.path().join("run");
+    assert!(train_unbaked(&cfg, &run_dir).status.success());
+    let bake = |out: &str, set: &[&str]| {
+        let mut cmd = nuvo();
+        cmd.arg("bake").arg(&run_dir).arg("--out").arg(dir.path().join(out));
+        for s in set {
+            cmd.args(["--set", s]);
+        }
+        run(&mut cmd)
+    };
+    assert!(bake("before", &[]).status.success());
+    // The run's config now names a loss plugin that is not on disk: training could not go on, but
+    // baking builds no losses and gives the same atlas.
+    let path = run_dir.join("checkpoint.safetensors");
+    let mut ckpt = nuvo_core::Checkpoint::load(&path).unwrap();
+    ckpt.config_toml.push_str("\n[losses.gone]\nplugin = \"/nonexistent/libgone.so\"\n");
+    ckpt.save(&path).unwrap();
+    let out = bake("after", &[]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    for file in ["atlas.obj", "atlas.glb", "metrics.json"] {
+        let read = |d: &str| std::fs::read(dir.path().join(d).join(file)).unwrap();
+        assert!(read("before") == read("after"), "{file} differs");
+    }
+    // Other geometry than the atlas was trained on is named, not baked.
+    let other = dir.path().join("tetra.obj");
+    std::fs::write(&other, "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
+        .unwrap();
+    let set_other = format!("geometry.path={:?}", other.display().to_string());
+    let out = bake("other", &[&set_other]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("tetra.obj") && err.contains("not the geometry") && err.contains("output.bake_mesh"),
+        "{err}"
+    );
+    // With `output.bake_mesh` the configured geometry is not even read.
+    let bunny = common::repo().join("assets/stanford-bunny.obj");
+    let set_mesh = format!("output.bake_mesh={:?}", bunny.display().to_string());
+    let out = bake("onto", &["geometry.path=\"/nonexistent.obj\"", &set_mesh]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let read = |d: &str| std::fs::read(dir.path().join(d).join("metrics.json")).unwrap();
+    assert!(read("onto") == read("before"), "baking onto the same mesh by path gives the same atlas");
+}
+
+#[test]
 fn bench_times_the_steps_of_a_trained_run_with_overrides() {
     let dir = tempfile::tempdir().unwrap();
     let cfg = tiny_config(dir.path(), 4, 2);

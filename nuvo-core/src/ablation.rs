@@ -269,7 +269,7 @@ pub fn run_variant(
     let mut trainer = Trainer::new(loaded, registries.0, registries.1)?;
     let resume = resume && dir.join(crate::run::files::CHECKPOINT).exists();
     run(&mut trainer, &RunOptions { out_dir: dir.to_owned(), resume }, observer)?;
-    let report = write_outputs(&mut trainer, dir, &loaded.config.output)?;
+    let report = write_outputs(&mut trainer.atlas(), Some(trainer.source()), dir, &loaded.config.output)?;
     report.metrics.as_ref().map(Scores::from_metrics).ok_or(VariantError::NoMesh)
 }
 

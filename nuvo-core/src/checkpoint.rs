@@ -35,10 +35,18 @@ pub struct Checkpoint {
     pub to_canonical: Similarity,
     /// `(name, value)` of every parameter (sorted by name when loaded).
     pub params: Vec<(String, Tensor)>,
-    /// Adam's step count and its first and second moments, one vector per parameter.
-    pub adam: (u64, Vec<Vec<f32>>, Vec<Vec<f32>>),
+    /// The optimiser's state, its moments in the order of `params`.
+    pub adam: AdamState,
     /// Looks in a row at which the atlas had settled (`training.stop_when_settled`; 0 without it).
     pub settled_looks: u32,
+}
+
+/// Adam's state: its step count and its first and second moments, one vector per parameter.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AdamState {
+    pub steps: u64,
+    pub m: Vec<Vec<f32>>,
+    pub v: Vec<Vec<f32>>,
 }
 
 /// A checkpoint that could not be written or read.
@@ -84,7 +92,7 @@ impl Checkpoint {
     /// Writes the checkpoint atomically.
     pub fn save(&self, path: &Path) -> Result<(), CheckpointError> {
         let invalid = |m: String| CheckpointError::Invalid { path: path.to_owned(), message: m };
-        let (adam_steps, m, v) = &self.adam;
+        let AdamState { steps: adam_steps, m, v } = &self.adam;
         let mut blobs: Vec<(String, Vec<usize>, Vec<u8>)> = Vec::with_capacity(3 * self.params.len());
         for (k, (name, t)) in self.params.iter().enumerate() {
             let shape = vec![t.rows(), t.cols()];
@@ -167,7 +175,7 @@ impl Checkpoint {
             config_toml: meta.config,
             to_canonical: meta.to_canonical,
             params,
-            adam: (meta.adam_steps, m, v),
+            adam: AdamState { steps: meta.adam_steps, m, v },
             settled_looks: meta.settled_looks,
         })
     }
@@ -187,7 +195,11 @@ mod tests {
                 ("a.w".into(), Tensor::from_vec(2, 2, vec![1.0, -2.0, 3.5, f32::MIN_POSITIVE])),
                 ("b".into(), Tensor::scalar(7.0)),
             ],
-            adam: (41, vec![vec![0.1, 0.2, 0.3, 0.4], vec![0.5]], vec![vec![1.0, 2.0, 3.0, 4.0], vec![5.0]]),
+            adam: AdamState {
+                steps: 41,
+                m: vec![vec![0.1, 0.2, 0.3, 0.4], vec![0.5]],
+                v: vec![vec![1.0, 2.0, 3.0, 4.0], vec![5.0]],
+            },
             settled_looks: 1,
         }
     }

@@ -3,6 +3,8 @@
 //! - [`config`]: the TOML experiment config with `--set` overrides and located errors;
 //! - [`model`]: the `2n + 1` networks, `σ` and the normal grids;
 //! - [`trainer`]: one deterministic optimisation step at a time;
+//! - [`trained`]: a trained atlas (networks, parameters, frame), from a trainer or a checkpoint, which
+//!   evaluation, baking and export take;
 //! - [`run`]: the output folder, checkpoints, log, resume, budget and NaN rollback;
 //! - [`checkpoint`]: the safetensors checkpoint format;
 //! - [`ablation`]: sweeps of config variants and the paper's ablation table;
@@ -20,6 +22,7 @@ pub mod outputs;
 pub mod run;
 pub mod seeds;
 pub mod settling;
+pub mod trained;
 pub mod trainer;
 pub mod unwrap;
 pub mod warm_start;
@@ -28,4 +31,5 @@ pub use checkpoint::{Checkpoint, CheckpointError};
 pub use config::{ConfigError, ExperimentConfig, LoadedConfig};
 pub use model::NuvoModel;
 pub use run::{Observer, RunOptions, RunSummary, run};
-pub use trainer::{AtlasFields, StepOutcome, TrainError, Trainer};
+pub use trained::{AtlasFields, TrainedAtlas};
+pub use trainer::{StepOutcome, TrainError, Trainer};

@@ -38,12 +38,11 @@ use nuvo_atlas::pictures::{
 };
 use nuvo_atlas::refine::{RefineOptions, RefineReport, refine_islands};
 use nuvo_atlas::uvstats::{UvAnalysis, analyse_uv};
-use nuvo_geometry::{GeometryError, Similarity, TriMesh};
-use nuvo_losses::Networks;
+use nuvo_geometry::{GeometryError, GeometrySource, Similarity, TriMesh};
 use serde::Serialize;
 
 use crate::config::{OutputConfig, Packing};
-use crate::trainer::Trainer;
+use crate::trained::TrainedAtlas;
 
 /// Output file names.
 pub mod names {
@@ -71,6 +70,18 @@ pub enum OutputError {
         #[source]
         source: std::io::Error,
     },
+    /// The geometry to bake onto is not in the frame the atlas was trained in: the file changed
+    /// since training, or the config names another one.
+    #[error(
+        "{geometry}: not the geometry this atlas was trained on (its bounding box is centred at \
+         {:?} with scale {}; the trained geometry's at {:?} with scale {}); to bake onto another \
+         mesh placed like the trained geometry, set `output.bake_mesh`",
+        found.center, found.scale, trained.center, trained.scale
+    )]
+    OtherGeometry { geometry: String, found: Similarity, trained: Similarity },
+    /// Neither a scene nor `output.bake_mesh` to bake onto.
+    #[error("nothing to bake onto: no geometry source and no `output.bake_mesh`")]
+    NoGeometry,
 }
 
 /// Counts from the bake (the full face lists stay in memory only).
@@ -235,46 +246,55 @@ fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> OutputError + '_ {
     move |source| OutputError::Io { path: path.to_owned(), source }
 }
 
-/// Bakes, exports, draws and measures the trainer's atlas into `dir`. The mesh is `output.bake_mesh`
-/// when set, else the source's own (a mesh file's, or a density grid's marching-cubes mesh), else
-/// there is none and per-point UVs are written instead.
+/// Bakes, exports, draws and measures `atlas` into `dir`. The mesh is `output.bake_mesh` when set
+/// (in the coordinates of the geometry the atlas was trained on), else `scene`'s own (a mesh
+/// file's, or a density grid's marching-cubes mesh), else there is none and per-point UVs of
+/// `scene`'s samples are written instead. `scene` is the geometry the atlas was trained on: an
+/// error ([`OutputError::OtherGeometry`]) when its frame says otherwise. It is not read when
+/// `output.bake_mesh` is set, so may then be `None`.
 pub fn write_outputs(
-    trainer: &mut Trainer,
+    atlas: &mut TrainedAtlas,
+    scene: Option<&dyn GeometrySource>,
     dir: &Path,
     opts: &OutputConfig,
 ) -> Result<OutputReport, OutputError> {
     std::fs::create_dir_all(dir).map_err(io_err(dir))?;
     // The mesh to bake onto, in the canonical frame, and its vertices as the input stored them.
-    let mesh = match (&opts.bake_mesh, trainer.source().mesh()) {
-        (Some(path), _) => {
-            let mut m = nuvo_geometry::load_mesh(path)?;
-            m.uv = None;
-            let input = m.positions.clone();
-            m.transform(&trainer.source().to_canonical());
-            Some((m, Some(input)))
+    if let Some(path) = &opts.bake_mesh {
+        let mut m = nuvo_geometry::load_mesh(path)?;
+        m.uv = None;
+        let input = m.positions.clone();
+        m.transform(&atlas.frame());
+        return bake_and_measure(atlas, &m, Some(input), dir, opts);
+    }
+    let scene = scene.ok_or(OutputError::NoGeometry)?;
+    if scene.to_canonical() != atlas.frame() {
+        return Err(OutputError::OtherGeometry {
+            geometry: scene.describe(),
+            found: scene.to_canonical(),
+            trained: atlas.frame(),
+        });
+    }
+    match scene.mesh() {
+        Some(m) => {
+            let mesh = TriMesh { uv: None, ..m.clone() };
+            bake_and_measure(atlas, &mesh, scene.input_positions().map(<[_]>::to_vec), dir, opts)
         }
-        (None, Some(m)) => {
-            Some((TriMesh { uv: None, ..m.clone() }, trainer.source().input_positions().map(<[_]>::to_vec)))
-        }
-        (None, None) => None,
-    };
-    match mesh {
-        Some((mesh, input)) => bake_and_measure(trainer, &mesh, input, dir, opts),
-        None => write_point_uvs(trainer, dir, opts),
+        None => write_point_uvs(atlas, scene, dir, opts),
     }
 }
 
 fn bake_and_measure(
-    trainer: &mut Trainer,
+    atlas: &mut TrainedAtlas,
     mesh: &TriMesh,
     input_positions: Option<Vec<[f32; 3]>>,
     dir: &Path,
     opts: &OutputConfig,
 ) -> Result<OutputReport, OutputError> {
     let mut phases = Phases::start();
-    let n = trainer.model().charts();
-    let frame = trainer.source().to_canonical();
-    let fields = trainer.evaluate_atlas(&mesh.positions);
+    let n = atlas.charts();
+    let frame = atlas.frame();
+    let fields = atlas.evaluate_atlas(&mesh.positions);
     phases.done("evaluate");
     let layout = AtlasLayout::grid(n, opts.atlas_resolution, opts.gutter)?;
     let round_trip = (opts.round_trip_tolerance > 0.0)
@@ -339,7 +359,7 @@ fn bake_and_measure(
     )?;
     files.push(path(names::LAYOUT));
     files.extend(write_renders(&baked.mesh, &checker, dir, opts)?);
-    files.push(write_normal_grids(trainer, &layout, dir)?);
+    files.push(write_normal_grids(atlas, &layout, dir)?);
     phases.done("pictures");
 
     let eval =
@@ -349,7 +369,7 @@ fn bake_and_measure(
         metrics,
         bake: summarize(&baked.report, recount.as_ref(), &baked.face_chart, n),
         layout: finished,
-        steps: trainer.step_index(),
+        steps: atlas.steps(),
     };
     let json = serde_json::to_string_pretty(&summary)
         .map_err(|e| io_err(&path(names::METRICS))(std::io::Error::other(e)))?;
@@ -419,12 +439,16 @@ fn write_renders(
     Ok(files)
 }
 
-fn write_normal_grids(trainer: &Trainer, layout: &AtlasLayout, dir: &Path) -> Result<PathBuf, OutputError> {
-    let res = trainer.model().grid_resolution();
-    let params = trainer.params();
-    let images = (0..trainer.model().charts())
+fn write_normal_grids(
+    atlas: &TrainedAtlas,
+    layout: &AtlasLayout,
+    dir: &Path,
+) -> Result<PathBuf, OutputError> {
+    let res = atlas.model().grid_resolution();
+    let params = atlas.params();
+    let images = (0..atlas.charts())
         .map(|i| {
-            let values = params.value(trainer.model().grid_param(i)).data();
+            let values = params.value(atlas.model().grid_param(i)).data();
             chart_grid_image(&ChartGrid { width: res, height: res, values })
         })
         .collect::<Result<Vec<_>, _>>()?;
@@ -435,16 +459,17 @@ fn write_normal_grids(trainer: &Trainer, layout: &AtlasLayout, dir: &Path) -> Re
 
 /// Without a mesh: charts and atlas UVs of points drawn from the source, as CSV in input coordinates.
 fn write_point_uvs(
-    trainer: &mut Trainer,
+    atlas: &mut TrainedAtlas,
+    scene: &dyn GeometrySource,
     dir: &Path,
     opts: &OutputConfig,
 ) -> Result<OutputReport, OutputError> {
     const POINTS: usize = 200_000;
     let mut phases = Phases::start();
-    let n = trainer.model().charts();
-    let frame = trainer.source().to_canonical();
-    let pts = trainer.source().sample(POINTS, trainer.config().seed).positions;
-    let (probs, uvs) = trainer.evaluate_charts(&pts);
+    let n = atlas.charts();
+    let frame = atlas.frame();
+    let pts = scene.sample(POINTS, atlas.seed()).positions;
+    let (probs, uvs) = atlas.evaluate_charts(&pts);
     let layout = AtlasLayout::grid(n, opts.atlas_resolution, opts.gutter)?;
     let mut csv = String::from("x,y,z,chart,u,v\n");
     for (k, p) in pts.iter().enumerate() {

@@ -13,11 +13,12 @@ use nuvo_geometry::{BuildContext, GeometryError, GeometrySource, SourceRegistry}
 use nuvo_losses::{Loss, LossError, LossRegistry, Networks, StepContext};
 
 use crate::batch::{ShortBatch, StepBatch};
-use crate::checkpoint::{Checkpoint, CheckpointError};
+use crate::checkpoint::{AdamState, Checkpoint, CheckpointError};
 use crate::config::{ConfigError, ExperimentConfig, LoadedConfig};
-use crate::model::{MODEL_FRAME_SCALE, NuvoModel, groups};
+use crate::model::{NuvoModel, groups};
 use crate::seeds::{Stream, derive};
 use crate::settling::{Movement, Snapshot, movement};
+use crate::trained::{CheckpointMismatch, TrainedAtlas, checkpoint_params, fields_at};
 use crate::warm_start::ProjectionPrior;
 
 /// Anything that stops training.
@@ -48,6 +49,8 @@ pub enum TrainError {
     },
     #[error("{0}")]
     Resume(String),
+    #[error(transparent)]
+    Mismatch(#[from] CheckpointMismatch),
     #[error("training diverged: {0}")]
     Diverged(String),
 }
@@ -119,18 +122,6 @@ pub struct StepOutcome {
     /// How much the atlas moved since the settling probe's last look, when it looked after this
     /// step (`training.stop_when_settled`).
     pub moved: Option<Movement>,
-}
-
-/// The trained networks evaluated at `V` points (`n` charts, row-major), what baking needs.
-#[derive(Clone, Debug, PartialEq)]
-pub struct AtlasFields {
-    /// Chart probabilities `c(x)`, `V×n`.
-    pub probs: Vec<f32>,
-    /// Every chart's texture coordinates `t_i(x)`, `V×n×2`.
-    pub uvs: Vec<f32>,
-    /// `|s_i(t_i(x)) − x|` per point and chart (`V×n`) in the model frame, where the geometry's
-    /// longest bounding-box side is 1: small where chart `i`'s map is faithful at `x`.
-    pub round_trip: Vec<f32>,
 }
 
 /// The model, its parameters and optimiser, the scene, and the losses.
@@ -394,50 +385,10 @@ impl Trainer {
         Ok(culprit)
     }
 
-    /// The networks' fields at points given in the canonical frame (see [`AtlasFields`]),
-    /// evaluated in chunks, one network pass at a time, so memory stays bounded on huge meshes.
-    pub fn evaluate_atlas(&mut self, canonical: &[[f32; 3]]) -> AtlasFields {
-        self.fields_at(canonical, true)
-    }
-
-    /// [`AtlasFields::probs`] and [`AtlasFields::uvs`] alone: what a reader of charts and UVs needs,
-    /// without the surface networks' pass the round trip costs.
-    pub fn evaluate_charts(&mut self, canonical: &[[f32; 3]]) -> (Vec<f32>, Vec<f32>) {
-        let AtlasFields { probs, uvs, .. } = self.fields_at(canonical, false);
-        (probs, uvs)
-    }
-
-    /// [`Trainer::evaluate_atlas`]; `round_trip` empty unless `with_round_trip`.
-    fn fields_at(&mut self, canonical: &[[f32; 3]], with_round_trip: bool) -> AtlasFields {
-        const CHUNK: usize = 16384;
-        let n = self.model.charts();
-        let mut probs = Vec::with_capacity(canonical.len() * n);
-        let mut uvs = vec![0.0f32; canonical.len() * n * 2];
-        let mut round_trip = vec![0.0f32; if with_round_trip { canonical.len() * n } else { 0 }];
-        for (c, chunk) in canonical.chunks(CHUNK).enumerate() {
-            let x = self.fresh_model_frame_input(chunk);
-            let logits = self.model.chart_logits(&mut self.tape, x);
-            let p = self.tape.softmax(logits);
-            probs.extend_from_slice(self.tape.value(p));
-            for i in 0..n {
-                let x = self.fresh_model_frame_input(chunk);
-                let t = self.model.texture(&mut self.tape, i, x);
-                for (k, uv) in self.tape.value(t).chunks_exact(2).enumerate() {
-                    let at = (c * CHUNK + k) * n + i;
-                    uvs[2 * at..2 * at + 2].copy_from_slice(uv);
-                }
-                if with_round_trip {
-                    let back = self.model.surface(&mut self.tape, i, t);
-                    let rows = self.tape.value(back).chunks_exact(3).zip(self.tape.value(x).chunks_exact(3));
-                    for (k, (s, x)) in rows.enumerate() {
-                        let at = (c * CHUNK + k) * n + i;
-                        round_trip[at] = s.iter().zip(x).map(|(a, b)| (a - b) * (a - b)).sum::<f32>().sqrt();
-                    }
-                }
-            }
-        }
-        self.tape.reset();
-        AtlasFields { probs, uvs, round_trip }
+    /// The atlas as trained so far: the model and a copy of its parameters, in the source's frame.
+    pub fn atlas(&self) -> TrainedAtlas {
+        let params = self.tape.params().clone();
+        TrainedAtlas::new(self.model.clone(), params, self.source.to_canonical(), self.step, self.config.seed)
     }
 
     /// What the networks say now at the settling probe's points (`crate::settling`): a fixed
@@ -449,20 +400,8 @@ impl Trainer {
             let seed = derive(self.config.seed, 0, Stream::Probe);
             self.probe_points = self.source.sample(PROBE_POINTS, seed).positions;
         }
-        let points = std::mem::take(&mut self.probe_points);
-        let (probs, uvs) = self.evaluate_charts(&points);
-        self.probe_points = points;
-        Snapshot::from_fields(&probs, &uvs, self.model.charts())
-    }
-
-    /// Clears the tape and records `canonical` points, scaled into the model frame, as its input.
-    fn fresh_model_frame_input(&mut self, canonical: &[[f32; 3]]) -> Var {
-        self.tape.reset();
-        self.tape.input_with(Shape::new(canonical.len(), 3), |d| {
-            for (row, p) in d.chunks_exact_mut(3).zip(canonical) {
-                row.iter_mut().zip(p).for_each(|(r, &v)| *r = v * MODEL_FRAME_SCALE);
-            }
-        })
+        let fields = fields_at(&self.model, &mut self.tape, &self.probe_points, false);
+        Snapshot::from_fields(&fields.probs, &fields.uvs, self.model.charts())
     }
 
     /// A checkpoint of the current state. Its config describes the experiment, not where or how
@@ -480,7 +419,7 @@ impl Trainer {
             config_toml: toml::to_string(&config).unwrap_or_default(),
             to_canonical: self.source.to_canonical(),
             params: p.ids().map(|id| (p.info(id).name.clone(), p.value(id).clone())).collect(),
-            adam: (self.adam.steps(), m.to_vec(), v.to_vec()),
+            adam: AdamState { steps: self.adam.steps(), m: m.to_vec(), v: v.to_vec() },
             settled_looks: self.settled_looks,
         }
     }
@@ -488,33 +427,16 @@ impl Trainer {
     /// Continues from a checkpoint of this same experiment. Fails, changing nothing, if the
     /// checkpoint's parameters do not match this model's names and shapes.
     pub fn restore(&mut self, ckpt: &Checkpoint) -> Result<(), TrainError> {
-        let params = self.tape.params();
-        let mismatch = |m: String| TrainError::Resume(format!("the checkpoint does not fit this model: {m}"));
-        if ckpt.params.len() != params.len() {
-            return Err(mismatch(format!(
-                "{} parameters saved, {} in the model",
-                ckpt.params.len(),
-                params.len()
-            )));
+        let ids = checkpoint_params(self.tape.params(), ckpt)?;
+        let count = self.tape.params().len();
+        let (mut m, mut v) = (vec![Vec::new(); count], vec![Vec::new(); count]);
+        for (k, &id) in ids.iter().enumerate() {
+            m[id.index()] = ckpt.adam.m[k].clone();
+            v[id.index()] = ckpt.adam.v[k].clone();
         }
-        let mut values = Vec::with_capacity(params.len());
-        let (mut m, mut v) = (vec![Vec::new(); params.len()], vec![Vec::new(); params.len()]);
-        for (k, (name, t)) in ckpt.params.iter().enumerate() {
-            let id = params.find(name).ok_or_else(|| mismatch(format!("unknown parameter `{name}`")))?;
-            if params.value(id).shape() != t.shape() {
-                return Err(mismatch(format!(
-                    "`{name}` is {} in the checkpoint, {} in the model",
-                    t.shape(),
-                    params.value(id).shape()
-                )));
-            }
-            values.push((id, t.clone()));
-            m[id.index()] = ckpt.adam.1[k].clone();
-            v[id.index()] = ckpt.adam.2[k].clone();
-        }
-        self.adam.restore(ckpt.adam.0, m, v).map_err(mismatch)?;
-        for (id, t) in values {
-            *self.tape.params_mut().value_mut(id) = t;
+        self.adam.restore(ckpt.adam.steps, m, v).map_err(CheckpointMismatch)?;
+        for (&id, (_, t)) in ids.iter().zip(&ckpt.params) {
+            *self.tape.params_mut().value_mut(id) = t.clone();
         }
         self.step = ckpt.step;
         self.lr_scale = ckpt.lr_scale;

@@ -284,9 +284,9 @@ fn zero_weight_and_removed_losses_are_ablations() {
 
 #[test]
 fn atlas_evaluation_gives_probabilities_and_unit_square_uvs() {
-    let mut t = trainer(&small(""));
+    let t = trainer(&small(""));
     let pts = [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]];
-    let fields = t.evaluate_atlas(&pts);
+    let fields = t.atlas().evaluate_atlas(&pts);
     let (p, uv) = (&fields.probs, &fields.uvs);
     assert_eq!(p.len(), 3 * 2);
     assert_eq!(uv.len(), 3 * 2 * 2);
@@ -391,7 +391,7 @@ fn agreement_with_the_projection_prior(warm_start: &str, steps: usize) -> (f32, 
             [r * a.cos(), r * a.sin(), z]
         })
         .collect();
-    let fields = t.evaluate_atlas(&pts);
+    let fields = t.atlas().evaluate_atlas(&pts);
     let (probs, uvs) = (&fields.probs, &fields.uvs);
     let (mut agree, mut err) = (0usize, 0.0f32);
     for (k, p) in pts.iter().enumerate() {
@@ -573,4 +573,21 @@ fn a_config_without_losses_trains_the_papers_eight_and_no_loss_registered_later(
     // Listed, it is built like any other.
     let t = Trainer::new(&small("[losses.nan_probe]\n"), &sources(), &registry).unwrap();
     assert_eq!(t.terms().iter().map(|t| t.name.as_str()).collect::<Vec<_>>(), ["nan_probe"]);
+}
+
+#[test]
+fn an_atlas_from_a_checkpoint_evaluates_like_the_trainer_it_came_from() {
+    let mut t = trainer(&small(""));
+    for _ in 0..3 {
+        t.step().unwrap();
+    }
+    let ckpt = t.checkpoint();
+    let pts = [[0.0, 0.0, 1.0], [0.6, 0.0, -0.8], [0.0, -1.0, 0.0]];
+    let mut atlas = nuvo_core::TrainedAtlas::from_checkpoint(&ckpt, t.config()).unwrap();
+    assert_eq!(atlas.evaluate_atlas(&pts), t.atlas().evaluate_atlas(&pts));
+    assert_eq!((atlas.steps(), atlas.frame(), atlas.charts()), (3, ckpt.to_canonical, 2));
+    let mut narrower = t.config().clone();
+    narrower.model.width = 16;
+    let e = nuvo_core::TrainedAtlas::from_checkpoint(&ckpt, &narrower).err().unwrap().to_string();
+    assert!(e.contains("does not fit this model") && e.contains("chart.l0.w"), "{e}");
 }

@@ -44,7 +44,8 @@ fn train_two_steps(path: &Path, extra: &[String], out: &Path) -> Result<(), Stri
         .map_err(|e| e.to_string())?;
     run(&mut trainer, &RunOptions { out_dir: out.to_owned(), resume: false }, &mut Silent)
         .map_err(|e| e.to_string())?;
-    let report = write_outputs(&mut trainer, out, &loaded.config.output).map_err(|e| e.to_string())?;
+    let report = write_outputs(&mut trainer.atlas(), Some(trainer.source()), out, &loaded.config.output)
+        .map_err(|e| e.to_string())?;
     let metrics = report.metrics.ok_or("no metrics: the config has no mesh to bake onto")?;
     let i = &metrics.metrics.image;
     for (name, v) in [("boundary", i.boundary), ("stretch", i.stretch), ("conformal", i.conformal)] {
