@@ -43,7 +43,7 @@ pub fn run(args: &AblateArgs) -> anyhow::Result<()> {
     let sources = SourceRegistry::with_builtins();
     let base = config::load(&args.config, &args.set)?;
     let out = args.out.clone().unwrap_or_else(|| base.config.output.dir.clone());
-    let variants = selected(ablation::plan(&base, &losses), &args.only)?;
+    let variants = selected(ablation::plan(&base), &args.only)?;
     if args.dry_run {
         for v in &variants {
             println!(
@@ -116,7 +116,7 @@ fn run_one(
     registries: (&SourceRegistry, &LossRegistry),
 ) -> Result<ablation::Scores, String> {
     let attempt = || -> Result<ablation::Scores, VariantError> {
-        let loaded = ablation::load_variant(&args.config, &args.set, v, registries.1)?;
+        let loaded = ablation::load_variant(&args.config, &args.set, v)?;
         let mut progress = Progress::new(loaded.config.training.steps);
         let scores =
             ablation::run_variant(&loaded, &out.join(&v.dir_name), args.resume, registries, &mut progress);

@@ -23,52 +23,13 @@ use std::path::{Path, PathBuf};
 
 use nuvo_geometry::SourceRegistry;
 use nuvo_losses::LossRegistry;
+use nuvo_losses::builtin::PAPER;
 use serde::{Deserialize, Serialize};
 
 use crate::config::{self, ConfigError, ConfigSource, LoadedConfig};
 use crate::outputs::{OutputError, OutputMetrics, write_outputs};
 use crate::run::{Observer, RunOptions, run};
 use crate::trainer::{TrainError, Trainer};
-
-/// `[ablation]`: which variants `nuvo ablate` runs besides the base config.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct AblationConfig {
-    /// Run the base config as the first row (default true).
-    #[serde(default = "default_true")]
-    pub base: bool,
-    /// Losses removed one at a time, a `w/o NAME` variant each. Absent: every loss of the base
-    /// config; empty: none.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub remove_each: Option<Vec<String>>,
-    /// Further named variants, run in the order written.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub variants: Vec<VariantConfig>,
-}
-
-impl Default for AblationConfig {
-    fn default() -> Self {
-        AblationConfig { base: true, remove_each: None, variants: Vec::new() }
-    }
-}
-
-fn default_true() -> bool {
-    true
-}
-
-/// `[[ablation.variants]]`: a named change of the base config.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct VariantConfig {
-    /// Row label in the table (and, slugged, the run folder's name).
-    pub name: String,
-    /// Losses to drop from the base config.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub remove: Vec<String>,
-    /// `KEY=VALUE` overrides, as with `--set`.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub set: Vec<String>,
-}
 
 /// One planned run of a sweep.
 #[derive(Clone, Debug, PartialEq)]
@@ -84,14 +45,15 @@ pub struct Variant {
 }
 
 /// The runs of a sweep, in order: the base (unless disabled), one per removed loss, then the named
-/// variants. `base` is the loaded base config; losses it does not list come from `registry`.
-pub fn plan(base: &LoadedConfig, registry: &LossRegistry) -> Vec<Variant> {
+/// variants. `base` is the loaded base config (without a `[losses]` table it trains the paper's
+/// eight, `nuvo_losses::builtin::PAPER`).
+pub fn plan(base: &LoadedConfig) -> Vec<Variant> {
     let spec = base.config.ablation.clone().unwrap_or_default();
     let mut named: Vec<(String, Vec<String>, Vec<String>)> = Vec::new();
     if spec.base {
         named.push(("base".to_owned(), Vec::new(), Vec::new()));
     }
-    let removable = spec.remove_each.unwrap_or_else(|| base_losses(base, registry));
+    let removable = spec.remove_each.unwrap_or_else(|| base_losses(base));
     for loss in removable {
         named.push((format!("w/o {loss}"), vec![loss], Vec::new()));
     }
@@ -110,10 +72,10 @@ pub fn plan(base: &LoadedConfig, registry: &LossRegistry) -> Vec<Variant> {
 }
 
 /// Names of the losses the base config trains with.
-fn base_losses(base: &LoadedConfig, registry: &LossRegistry) -> Vec<String> {
+fn base_losses(base: &LoadedConfig) -> Vec<String> {
     match &base.config.losses {
         Some(map) => map.keys().cloned().collect(),
-        None => registry.list().map(|i| i.name.to_owned()).collect(),
+        None => PAPER.iter().map(|&n| n.to_owned()).collect(),
     }
 }
 
@@ -142,32 +104,26 @@ fn unique_slug(name: &str, taken: &[String]) -> String {
 }
 
 /// Loads the config file at `path` as `variant` sees it: the command line's `overrides`, then the
-/// variant's own, then its losses removed and the `[ablation]` table dropped. `registry` supplies
-/// the loss list when the file has no `[losses]` table (every built-in loss at its paper weight).
+/// variant's own, then its losses removed and the `[ablation]` table dropped. A file without a
+/// `[losses]` table gets the paper's eight listed first, at their paper weights.
 pub fn load_variant(
     path: &Path,
     overrides: &[String],
     variant: &Variant,
-    registry: &LossRegistry,
 ) -> Result<LoadedConfig, ConfigError> {
     let all: Vec<String> = overrides.iter().chain(&variant.set).cloned().collect();
     config::load_edited(path, &all, |tree, src| {
         tree.remove("ablation");
-        remove_losses(tree, &variant.remove, registry, src)
+        remove_losses(tree, &variant.remove, src)
     })
 }
 
-fn remove_losses(
-    tree: &mut toml::Table,
-    remove: &[String],
-    registry: &LossRegistry,
-    src: &ConfigSource,
-) -> Result<(), ConfigError> {
+fn remove_losses(tree: &mut toml::Table, remove: &[String], src: &ConfigSource) -> Result<(), ConfigError> {
     if remove.is_empty() {
         return Ok(());
     }
     let losses = tree.entry("losses").or_insert_with(|| {
-        let defaults = registry.list().map(|i| (i.name.to_owned(), toml::Value::Table(toml::Table::new())));
+        let defaults = PAPER.iter().map(|&n| (n.to_owned(), toml::Value::Table(toml::Table::new())));
         toml::Value::Table(defaults.collect())
     });
     let Some(losses) = losses.as_table_mut() else {
@@ -368,11 +324,10 @@ mod tests {
 
     #[test]
     fn default_plan_is_base_plus_every_builtin_loss() {
-        let reg = LossRegistry::with_builtins();
-        let p = plan(&loaded(GEOMETRY), &reg);
+        let p = plan(&loaded(GEOMETRY));
         assert_eq!(p[0].name, "base");
         let names: Vec<&str> = p[1..].iter().map(|v| v.remove[0].as_str()).collect();
-        let builtins: Vec<&str> = reg.list().map(|i| i.name).collect();
+        let builtins: Vec<&str> = PAPER.to_vec();
         assert_eq!(names, builtins);
         assert_eq!(p[1].dir_name, format!("wo_{}", builtins[0]));
     }
@@ -384,7 +339,7 @@ mod tests {
              [[ablation.variants]]\nname = \"n=1\"\nset = [\"model.charts=1\"]\n\
              [[ablation.variants]]\nname = \"n=1\"\nremove = [\"cycle_3d\"]\n"
         );
-        let p = plan(&loaded(&text), &LossRegistry::with_builtins());
+        let p = plan(&loaded(&text));
         let got: Vec<(&str, &str)> = p.iter().map(|v| (v.name.as_str(), v.dir_name.as_str())).collect();
         assert_eq!(got, [("w/o texture", "wo_texture"), ("n=1", "n-1"), ("n=1", "n-1_2")]);
         assert_eq!(p[1].set, ["model.charts=1"]);
@@ -395,17 +350,16 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("a.toml");
         std::fs::write(&path, format!("{GEOMETRY}[ablation]\nremove_each = []\n")).unwrap();
-        let reg = LossRegistry::with_builtins();
         let v = Variant {
             name: "x".into(),
             dir_name: "x".into(),
             remove: vec!["texture".into(), "entropy".into()],
             set: vec!["model.charts=3".into()],
         };
-        let l = load_variant(&path, &["training.steps=7".into()], &v, &reg).unwrap();
+        let l = load_variant(&path, &["training.steps=7".into()], &v).unwrap();
         let losses: Vec<&String> = l.config.losses.as_ref().unwrap().keys().collect();
         let expected: Vec<String> =
-            reg.list().map(|i| i.name.to_owned()).filter(|n| n != "texture" && n != "entropy").collect();
+            PAPER.iter().map(|&n| n.to_owned()).filter(|n| n != "texture" && n != "entropy").collect();
         assert_eq!(losses, expected.iter().collect::<Vec<_>>());
         assert_eq!((l.config.model.charts, l.config.training.steps), (3, 7));
         assert!(l.config.ablation.is_none(), "variants do not carry the sweep");
@@ -418,7 +372,7 @@ mod tests {
         std::fs::write(&path, format!("{GEOMETRY}[losses.cycle_3d]\n[losses.surface]\n")).unwrap();
         let v =
             Variant { name: "x".into(), dir_name: "x".into(), remove: vec!["textur".into()], set: vec![] };
-        let e = load_variant(&path, &[], &v, &LossRegistry::with_builtins()).unwrap_err().to_string();
+        let e = load_variant(&path, &[], &v).unwrap_err().to_string();
         assert!(e.contains("`textur`") && e.contains("cycle_3d, surface"), "{e}");
     }
 

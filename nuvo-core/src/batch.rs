@@ -1,10 +1,12 @@
 //! Drawing one step's data: surface samples, UV samples and random tangent frames.
 
+use glam::Vec3;
 use nuvo_geometry::GeometrySource;
 use nuvo_losses::StepData;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use crate::config::TrainingConfig;
 use crate::model::MODEL_FRAME_SCALE;
 use crate::seeds::{Stream, derive};
 
@@ -28,23 +30,46 @@ pub struct ShortBatch {
     pub wanted: usize,
 }
 
+/// How many samples of each kind a step draws.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BatchSizes {
+    /// Surface samples `x` (`training.batch_3d`).
+    pub points: usize,
+    /// UV samples `u` (`training.batch_uv`).
+    pub uv: usize,
+    /// Of the surface samples, how many (the first) carry a tangent frame for the distortion
+    /// losses (`training.batch_distortion`, all of them by default).
+    pub distortion: usize,
+}
+
+impl BatchSizes {
+    /// The sizes `[training]` asks for.
+    pub fn of(t: &TrainingConfig) -> Self {
+        BatchSizes {
+            points: t.batch_3d,
+            uv: t.batch_uv,
+            distortion: t.batch_distortion.unwrap_or(t.batch_3d),
+        }
+    }
+}
+
 impl StepBatch {
     /// Draws the batch of `step` for a run seeded with `seed`: a pure function of its arguments.
-    /// Tangent frames are drawn for the first `batch_distortion` samples only (the ones the
+    /// Tangent frames are drawn for the first `sizes.distortion` samples only (the ones the
     /// distortion losses read), from the same stream, so they do not depend on that count.
     pub fn draw(
         source: &dyn GeometrySource,
-        (batch_3d, batch_uv, batch_distortion): (usize, usize, usize),
+        sizes: BatchSizes,
         seed: u64,
         step: u64,
     ) -> Result<Self, ShortBatch> {
         let SurfaceSamples { points, normals } =
-            surface_samples(source, batch_3d, derive(seed, step, Stream::Surface))?;
+            surface_samples(source, sizes.points, derive(seed, step, Stream::Surface))?;
         let mut rng = ChaCha8Rng::seed_from_u64(derive(seed, step, Stream::Uv));
-        let uv = (0..batch_uv).map(|_| [rng.random::<f32>(), rng.random::<f32>()]).collect();
+        let uv = (0..sizes.uv).map(|_| [rng.random::<f32>(), rng.random::<f32>()]).collect();
         let mut rng = ChaCha8Rng::seed_from_u64(derive(seed, step, Stream::Tangents));
         let (tangents_p, tangents_q) =
-            normals.iter().take(batch_distortion).map(|n| random_tangent_frame(n, &mut rng)).unzip();
+            normals.iter().take(sizes.distortion).map(|n| random_tangent_frame(n, &mut rng)).unzip();
         Ok(StepBatch { points, normals, uv, tangents_p, tangents_q })
     }
 
@@ -86,27 +111,20 @@ pub fn surface_samples(
     Ok(SurfaceSamples { points, normals: samples.normals })
 }
 
-fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
 /// A uniformly random orthonormal pair `(p, q = n × p)` in the tangent plane of the unit normal `n`.
 pub fn random_tangent_frame(n: &[f32; 3], rng: &mut impl Rng) -> ([f32; 3], [f32; 3]) {
+    let n = Vec3::from(*n);
     // Any vector not parallel to n, projected and normalised, then rotated by a random angle.
-    let helper = if n[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
-    let d = dot(helper, *n);
-    let a: [f32; 3] = std::array::from_fn(|k| helper[k] - d * n[k]);
-    let la = dot(a, a).sqrt();
-    let a = a.map(|v| v / la);
-    let b = cross(*n, a);
+    let helper = if n.x.abs() < 0.9 { Vec3::X } else { Vec3::Y };
+    let a = helper - helper.dot(n) * n;
+    // Divided by the length (not multiplied by its reciprocal, as `normalize` does): the frames,
+    // and so every run's bytes, stay what they were.
+    let a = a / a.length();
+    let b = n.cross(a);
     let angle: f32 = rng.random_range(0.0..std::f32::consts::TAU);
     let (s, c) = angle.sin_cos();
-    let p: [f32; 3] = std::array::from_fn(|k| c * a[k] + s * b[k]);
-    (p, cross(*n, p))
+    let p = c * a + s * b;
+    (p.into(), n.cross(p).into())
 }
 
 #[cfg(test)]
@@ -118,8 +136,9 @@ mod tests {
         let mut rng = ChaCha8Rng::seed_from_u64(0);
         for n in [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.6, 0.0, 0.8], [-0.48, 0.6, 0.64]] {
             let (p, q) = random_tangent_frame(&n, &mut rng);
-            assert!(dot(p, n).abs() < 1e-6 && dot(q, n).abs() < 1e-6 && dot(p, q).abs() < 1e-6);
-            assert!((dot(p, p) - 1.0).abs() < 1e-5 && (dot(q, q) - 1.0).abs() < 1e-5);
+            let (p, q, n) = (Vec3::from(p), Vec3::from(q), Vec3::from(n));
+            assert!(p.dot(n).abs() < 1e-6 && q.dot(n).abs() < 1e-6 && p.dot(q).abs() < 1e-6);
+            assert!((p.length() - 1.0).abs() < 1e-5 && (q.length() - 1.0).abs() < 1e-5);
         }
     }
 }

@@ -50,7 +50,7 @@ pub struct ExperimentConfig {
     pub output: OutputConfig,
     /// `[ablation]`: the variants `nuvo ablate` runs (ignored by `nuvo train`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub ablation: Option<crate::ablation::AblationConfig>,
+    pub ablation: Option<AblationConfig>,
 }
 
 /// `[geometry]`: which registered source, and its own options (checked by the source itself).
@@ -352,9 +352,52 @@ pub enum Packing {
     Islands,
 }
 
+/// `[ablation]`: which variants `nuvo ablate` runs besides the base config.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AblationConfig {
+    /// Run the base config as the first row (default true).
+    #[serde(default = "default_true")]
+    pub base: bool,
+    /// Losses removed one at a time, a `w/o NAME` variant each. Absent: every loss of the base
+    /// config; empty: none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub remove_each: Option<Vec<String>>,
+    /// Further named variants, run in the order written.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub variants: Vec<VariantConfig>,
+}
+
+impl Default for AblationConfig {
+    fn default() -> Self {
+        AblationConfig { base: true, remove_each: None, variants: Vec::new() }
+    }
+}
+
+fn default_true() -> bool {
+    true
+}
+
+/// `[[ablation.variants]]`: a named change of the base config.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VariantConfig {
+    /// Row label in the table (and, slugged, the run folder's name).
+    pub name: String,
+    /// Losses to drop from the base config.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub remove: Vec<String>,
+    /// `KEY=VALUE` overrides, as with `--set`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub set: Vec<String>,
+}
+
 /// A config that failed to load, with where and why.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
+    /// The resolved config could not be written as TOML (a value TOML cannot hold).
+    #[error("cannot write the resolved config as TOML: {0}")]
+    Serialize(String),
     #[error("cannot read config {path}: {source}")]
     Io {
         path: PathBuf,
@@ -605,6 +648,11 @@ impl ModelConfig {
 }
 
 impl ExperimentConfig {
+    /// The resolved config as TOML, as runs save it (`config.toml`, the checkpoint).
+    pub fn to_toml(&self) -> Result<String, ConfigError> {
+        toml::to_string(self).map_err(|e| ConfigError::Serialize(e.to_string()))
+    }
+
     /// Makes the input paths written in the file absolute (`base` is the config's folder): every
     /// `path` or `file` key inside `[geometry]` (at any depth), each `losses.NAME.plugin`, and
     /// `output.bake_mesh`. The resolved
@@ -636,24 +684,40 @@ impl ExperimentConfig {
         }
     }
 
-    /// Range checks that serde's types cannot express.
+    /// Range checks that serde's types cannot express, section by section.
     pub fn validate(&self, src: &ConfigSource) -> Result<(), ConfigError> {
-        let m = &self.model;
-        let t = &self.training;
-        let o = &self.optimizer;
-        let positive =
-            |key: &str, v: usize| if v == 0 { Err(src.invalid(key, "must be at least 1")) } else { Ok(()) };
-        positive("model.charts", m.charts)?;
+        self.model.validate(src)?;
+        self.training.validate(src)?;
+        self.optimizer.validate(src)?;
+        if let Some(w) = &self.warm_start {
+            w.validate(self.model.charts, src)?;
+        }
+        self.output.validate(src)?;
+        for (name, l) in self.losses.iter().flatten() {
+            if let Some(w) = l.weight
+                && !(w.is_finite() && w >= 0.0)
+            {
+                return Err(src.invalid(&format!("losses.{name}.weight"), "must be a non-negative number"));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl ModelConfig {
+    fn validate(&self, src: &ConfigSource) -> Result<(), ConfigError> {
+        let m = self;
+        positive("model.charts", m.charts, src)?;
         if m.charts > 256 {
             return Err(
                 src.invalid("model.charts", format!("{} charts is more than the supported 256", m.charts))
             );
         }
-        positive("model.depth", m.depth)?;
-        positive("model.width", m.width)?;
+        positive("model.depth", m.depth, src)?;
+        positive("model.width", m.width, src)?;
         for (name, ov) in [("chart", &m.chart), ("texture", &m.texture), ("surface", &m.surface)] {
-            positive(&format!("model.{name}.depth"), ov.depth.unwrap_or(1))?;
-            positive(&format!("model.{name}.width"), ov.width.unwrap_or(1))?;
+            positive(&format!("model.{name}.depth"), ov.depth.unwrap_or(1), src)?;
+            positive(&format!("model.{name}.width"), ov.width.unwrap_or(1), src)?;
             if ov.posenc.is_some_and(|p| p > 16) {
                 return Err(
                     src.invalid(&format!("model.{name}.posenc"), "degrees above 16 overflow f32 frequencies")
@@ -667,10 +731,17 @@ impl ExperimentConfig {
         if !(m.encoding_scale.is_finite() && m.encoding_scale > 0.0) {
             return Err(src.invalid("model.encoding_scale", "must be a positive number"));
         }
-        positive("training.batch_3d", t.batch_3d)?;
-        positive("training.batch_uv", t.batch_uv)?;
+        Ok(())
+    }
+}
+
+impl TrainingConfig {
+    fn validate(&self, src: &ConfigSource) -> Result<(), ConfigError> {
+        let t = self;
+        positive("training.batch_3d", t.batch_3d, src)?;
+        positive("training.batch_uv", t.batch_uv, src)?;
         if let Some(k) = t.batch_distortion {
-            positive("training.batch_distortion", k)?;
+            positive("training.batch_distortion", k, src)?;
             if k > t.batch_3d {
                 return Err(src.invalid(
                     "training.batch_distortion",
@@ -696,6 +767,13 @@ impl ExperimentConfig {
         if t.checkpoint_every == 0 {
             return Err(src.invalid("training.checkpoint_every", "must be at least 1"));
         }
+        Ok(())
+    }
+}
+
+impl OptimizerConfig {
+    fn validate(&self, src: &ConfigSource) -> Result<(), ConfigError> {
+        let o = self;
         for (key, v) in [
             ("optimizer.lr_mlp", o.lr_mlp),
             ("optimizer.lr_sigma", o.lr_sigma),
@@ -716,24 +794,13 @@ impl ExperimentConfig {
         if !(0.0..=1.0).contains(&o.final_lr_factor) {
             return Err(src.invalid("optimizer.final_lr_factor", "must be in [0, 1]"));
         }
-        if let Some(w) = &self.warm_start {
-            if !(w.weight.is_finite() && w.weight >= 0.0) {
-                return Err(src.invalid("warm_start.weight", "must be a non-negative number"));
-            }
-            if !(-1.0 < w.min_alignment && w.min_alignment < 1.0) {
-                return Err(src.invalid("warm_start.min_alignment", "must be in (-1, 1): a cosine"));
-            }
-            if w.enabled() && w.samples < self.model.charts {
-                return Err(src.invalid("warm_start.samples", "needs at least one sample per chart"));
-            }
-            if w.occlusion && w.projection != crate::warm_start::Projection::Orthographic {
-                return Err(src.invalid(
-                    "warm_start.occlusion",
-                    "tests what an orthographic projection sees; set projection = \"orthographic\" or remove it",
-                ));
-            }
-        }
-        let out = &self.output;
+        Ok(())
+    }
+}
+
+impl OutputConfig {
+    fn validate(&self, src: &ConfigSource) -> Result<(), ConfigError> {
+        let out = self;
         if !(16..=16384).contains(&out.atlas_resolution) {
             return Err(src.invalid("output.atlas_resolution", "must be between 16 and 16384 texels"));
         }
@@ -759,15 +826,13 @@ impl ExperimentConfig {
         if !(16..=8192).contains(&out.render_resolution) {
             return Err(src.invalid("output.render_resolution", "must be between 16 and 8192 pixels"));
         }
-        for (name, l) in self.losses.iter().flatten() {
-            if let Some(w) = l.weight
-                && !(w.is_finite() && w >= 0.0)
-            {
-                return Err(src.invalid(&format!("losses.{name}.weight"), "must be a non-negative number"));
-            }
-        }
         Ok(())
     }
+}
+
+/// `Err` naming `key` unless `v ≥ 1`.
+fn positive(key: &str, v: usize, src: &ConfigSource) -> Result<(), ConfigError> {
+    if v == 0 { Err(src.invalid(key, "must be at least 1")) } else { Ok(()) }
 }
 
 fn finite(key: &str, v: f32, src: &ConfigSource) -> Result<(), ConfigError> {

@@ -89,7 +89,7 @@ pub fn run(
     let ckpt_path = dir.join(files::CHECKPOINT);
     let resumed_from = prepare_start(trainer, opts, &ckpt_path)?;
     let config_path = dir.join(files::CONFIG);
-    let config_text = toml::to_string(trainer.config()).unwrap_or_default();
+    let config_text = trainer.config().to_toml()?;
     write_atomic(&config_path, config_text.as_bytes()).map_err(io_err(&config_path))?;
     let log_path = dir.join(files::LOG);
     let (mut log, earlier_seconds) = open_log(&log_path, trainer.step_index())?;
@@ -99,7 +99,7 @@ pub fn run(
     let budget = trainer.config().training.time_budget_minutes.map(|m| m * 60.0);
     let every = trainer.config().training.checkpoint_every;
     let max_bad = trainer.config().training.max_bad_steps;
-    let mut snapshot = trainer.checkpoint();
+    let mut snapshot = trainer.checkpoint()?;
     let mut summary = RunSummary {
         steps: 0,
         skipped: 0,
@@ -155,13 +155,13 @@ pub fn run(
         }
         summary.last = Some(outcome);
         if trainer.step_index().is_multiple_of(every) && consecutive_bad == 0 {
-            snapshot = trainer.checkpoint();
+            snapshot = trainer.checkpoint()?;
             snapshot.save(&ckpt_path)?;
         }
     }
     log.flush().map_err(io_err(&log_path))?;
     if consecutive_bad == 0 {
-        snapshot = trainer.checkpoint();
+        snapshot = trainer.checkpoint()?;
     }
     snapshot.save(&ckpt_path)?;
     summary.steps = trainer.step_index();
@@ -221,7 +221,12 @@ fn open_log(path: &Path, from_step: u64) -> Result<(std::io::BufWriter<std::fs::
         let f = std::fs::File::create(path).map_err(io_err(path))?;
         return Ok((std::io::BufWriter::new(f), 0.0));
     }
-    let old = std::fs::read_to_string(path).unwrap_or_default();
+    // A log lost since the checkpoint starts afresh; one that cannot be read is an error, not
+    // silently dropped.
+    let old = match std::fs::read_to_string(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => String::new(),
+        read => read.map_err(io_err(path))?,
+    };
     let kept: String = old
         .lines()
         .filter(|l| {

@@ -12,7 +12,7 @@ use nuvo_autodiff::{ParamStore, Shape, Tape, Var};
 use nuvo_geometry::{BuildContext, GeometryError, GeometrySource, SourceRegistry};
 use nuvo_losses::{Loss, LossError, LossRegistry, Networks, StepContext};
 
-use crate::batch::{ShortBatch, StepBatch};
+use crate::batch::{BatchSizes, ShortBatch, StepBatch};
 use crate::checkpoint::{AdamState, Checkpoint, CheckpointError};
 use crate::config::{ConfigError, ExperimentConfig, LoadedConfig};
 use crate::model::{NuvoModel, groups};
@@ -271,8 +271,7 @@ impl Trainer {
     }
 
     fn step_on_worker(&mut self) -> Result<StepOutcome, TrainError> {
-        let t = &self.config.training;
-        let sizes = (t.batch_3d, t.batch_uv, t.batch_distortion.unwrap_or(t.batch_3d));
+        let sizes = BatchSizes::of(&self.config.training);
         self.batch = StepBatch::draw(&*self.source, sizes, self.config.seed, self.step)?;
         let lr_factor = self.schedule.factor(self.step) * self.lr_scale;
         let mut outcome = StepOutcome {
@@ -407,21 +406,21 @@ impl Trainer {
     /// A checkpoint of the current state. Its config describes the experiment, not where or how
     /// long it ran: `output.dir` and the time budget are left at their defaults, so the same
     /// experiment gives the same checkpoint bytes wherever it is written.
-    pub fn checkpoint(&self) -> Checkpoint {
+    pub fn checkpoint(&self) -> Result<Checkpoint, TrainError> {
         let p = self.tape.params();
         let (m, v) = self.adam.moments();
         let mut config = self.config.clone();
         config.output.dir = crate::config::OutputConfig::default().dir;
         config.training.time_budget_minutes = None;
-        Checkpoint {
+        Ok(Checkpoint {
             step: self.step,
             lr_scale: self.lr_scale,
-            config_toml: toml::to_string(&config).unwrap_or_default(),
+            config_toml: config.to_toml()?,
             to_canonical: self.source.to_canonical(),
             params: p.ids().map(|id| (p.info(id).name.clone(), p.value(id).clone())).collect(),
             adam: AdamState { steps: self.adam.steps(), m: m.to_vec(), v: v.to_vec() },
             settled_looks: self.settled_looks,
-        }
+        })
     }
 
     /// Continues from a checkpoint of this same experiment. Fails, changing nothing, if the

@@ -360,7 +360,7 @@ pub const MAX_STEPS: u64 = 4000;
 /// changes it; within [`MIN_STEPS`]`..=`[`MAX_STEPS`]). The caller builds the run's trainer with it,
 /// since the warm start's length follows the step count ([`recipe`]).
 pub fn fit_steps(trainer: &mut Trainer, budget_seconds: f64) -> Result<(u64, Decision), UnwrapError> {
-    let start = trainer.checkpoint();
+    let start = trainer.checkpoint()?;
     // One untimed step first: it allocates the tape's buffers.
     trainer.step()?;
     let t = Instant::now();

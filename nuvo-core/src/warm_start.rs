@@ -37,7 +37,7 @@ use nuvo_losses::{ChartRows, Loss, LossError, Samples, StepContext};
 use serde::{Deserialize, Serialize};
 
 use crate::batch::{ShortBatch, surface_samples};
-use crate::config::ExperimentConfig;
+use crate::config::{ConfigError, ConfigSource, ExperimentConfig};
 use crate::seeds::{Stream, derive};
 
 /// `[warm_start]`: the projection prior (see the module docs). Absent or `steps = 0`: off.
@@ -81,6 +81,26 @@ impl WarmStartConfig {
     /// Whether the warm start runs at all.
     pub fn enabled(&self) -> bool {
         self.steps > 0
+    }
+
+    /// Range checks of `[warm_start]` for a model of `charts` charts.
+    pub(crate) fn validate(&self, charts: usize, src: &ConfigSource) -> Result<(), ConfigError> {
+        if !(self.weight.is_finite() && self.weight >= 0.0) {
+            return Err(src.invalid("warm_start.weight", "must be a non-negative number"));
+        }
+        if !(-1.0 < self.min_alignment && self.min_alignment < 1.0) {
+            return Err(src.invalid("warm_start.min_alignment", "must be in (-1, 1): a cosine"));
+        }
+        if self.enabled() && self.samples < charts {
+            return Err(src.invalid("warm_start.samples", "needs at least one sample per chart"));
+        }
+        if self.occlusion && self.projection != Projection::Orthographic {
+            return Err(src.invalid(
+                "warm_start.occlusion",
+                "tests what an orthographic projection sees; set projection = \"orthographic\" or remove it",
+            ));
+        }
+        Ok(())
     }
 }
 
@@ -162,7 +182,7 @@ fn planar_bounds(planar: impl Iterator<Item = [f32; 2]>) -> ([f32; 2], [f32; 2],
 }
 
 fn dot(a: &[f32; 3], b: &[f32; 3]) -> f32 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    glam::Vec3::from(*a).dot(glam::Vec3::from(*b))
 }
 
 /// The fitted prior: one map per chart.

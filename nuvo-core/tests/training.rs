@@ -109,7 +109,7 @@ fn a_resumed_run_matches_an_uninterrupted_one() {
     for s in 0..33 {
         partial.step().unwrap();
         if s + 1 == 20 {
-            partial.checkpoint().save(&out.join(files::CHECKPOINT)).unwrap();
+            partial.checkpoint().unwrap().save(&out.join(files::CHECKPOINT)).unwrap();
         }
     }
     std::fs::write(out.join(files::LOG), (0..33).map(|s| format!("{{\"step\":{s}}}\n")).collect::<String>())
@@ -138,7 +138,7 @@ fn an_existing_run_is_not_overwritten_and_a_missing_one_cannot_resume() {
     let mut t = trainer(&small(""));
     t.step().unwrap();
     std::fs::create_dir_all(&out).unwrap();
-    t.checkpoint().save(&out.join(files::CHECKPOINT)).unwrap();
+    t.checkpoint().unwrap().save(&out.join(files::CHECKPOINT)).unwrap();
     let e = run(&mut trainer(&small("")), &RunOptions { out_dir: out.clone(), resume: false }, &mut Silent)
         .unwrap_err();
     assert!(e.to_string().contains("--resume"), "{e}");
@@ -545,7 +545,7 @@ fn a_resumed_run_settles_where_an_uninterrupted_one_does() {
     for s in 0..60 {
         partial.step().unwrap();
         if s + 1 == 50 {
-            let ckpt = partial.checkpoint();
+            let ckpt = partial.checkpoint().unwrap();
             assert_eq!(ckpt.settled_looks, 1);
             ckpt.save(&out.join(files::CHECKPOINT)).unwrap();
         }
@@ -581,7 +581,7 @@ fn an_atlas_from_a_checkpoint_evaluates_like_the_trainer_it_came_from() {
     for _ in 0..3 {
         t.step().unwrap();
     }
-    let ckpt = t.checkpoint();
+    let ckpt = t.checkpoint().unwrap();
     let pts = [[0.0, 0.0, 1.0], [0.6, 0.0, -0.8], [0.0, -1.0, 0.0]];
     let mut atlas = nuvo_core::TrainedAtlas::from_checkpoint(&ckpt, t.config()).unwrap();
     assert_eq!(atlas.evaluate_atlas(&pts), t.atlas().evaluate_atlas(&pts));
