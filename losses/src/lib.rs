@@ -1,8 +1,11 @@
 //! `nuvo-losses`: the terms of Nuvo's objective as named, weighted plugins.
 //!
 //! A loss implements [`Loss`]: given the per-step [`StepContext`] (the batch and every network output,
-//! computed once and shared), it records its value on the tape. The [`LossRegistry`] maps the names
-//! used in `[losses.NAME]` config tables to constructors; [`builtin`] holds the paper's eight:
+//! computed once and shared), it records its value on the tape. A loss that configs name implements
+//! [`RegisteredLoss`] too (its [`LossInfo`] and a constructor from its options table, the shape of a
+//! run-time plugin) and is added with [`LossRegistry::add`]; the registry maps the names used in
+//! `[losses.NAME]` config tables to constructors. [`builtin`] holds the paper's eight
+//! ([`builtin::PAPER`], what a config without `[losses]` trains):
 //!
 //! | name | paper | default weight |
 //! |---|---|---|

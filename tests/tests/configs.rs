@@ -87,13 +87,12 @@ fn every_ablation_variant_of_the_shipped_sweeps_loads() {
     let mut configs = Vec::new();
     all_configs(&dir, &mut configs);
     assert!(!configs.is_empty());
-    let losses = LossRegistry::with_builtins();
     for path in configs {
         let base = config::load(&path, &[]).unwrap();
-        let variants = ablation::plan(&base, &losses);
+        let variants = ablation::plan(&base);
         assert!(variants.len() >= 2, "{}", path.display());
         for v in &variants {
-            let loaded = ablation::load_variant(&path, &[], v, &losses)
+            let loaded = ablation::load_variant(&path, &[], v)
                 .unwrap_or_else(|e| panic!("{} variant {}: {e}", path.display(), v.name));
             let names: Vec<&String> = loaded.config.losses.iter().flat_map(|l| l.keys()).collect();
             for removed in &v.remove {
