@@ -19,6 +19,7 @@
 #![warn(missing_docs)]
 
 pub mod camera;
+pub(crate) mod coords;
 pub mod density;
 pub(crate) mod eigen;
 pub mod error;
@@ -27,7 +28,6 @@ pub mod fsio;
 pub mod gltf_io;
 pub mod isosurface;
 pub mod load;
-pub(crate) mod math;
 pub mod mesh;
 pub mod mesh_source;
 pub mod normals;
@@ -47,10 +47,10 @@ pub mod testdata;
 pub mod volume;
 pub mod xyz;
 
+pub use coords::MAX_COORDINATE;
 pub use error::GeometryError;
 pub use frame::{Aabb, Similarity};
 pub use load::load_mesh;
-pub use math::MAX_COORDINATE;
 pub use mesh::{TriMesh, UvLayer};
 pub use registry::{BuildContext, SourceBuilder, SourceRegistry};
 pub use source::{GeometrySource, SurfaceSamples};

@@ -17,10 +17,11 @@ use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 use std::num::NonZero;
 
+use glam::Vec3;
 use rayon::prelude::*;
 
+use crate::coords::V3;
 use crate::eigen::smallest_eigenvector;
-use crate::math::{V3, dot, neg, sub};
 
 /// Estimates outward unit normals for `points` from their `k` nearest neighbours (`k >= 3`,
 /// including the point itself). Deterministic. Points whose neighbourhood is degenerate (all
@@ -38,10 +39,10 @@ pub fn estimate_normals(points: &[V3], k: usize) -> Vec<V3> {
             tree.nearest_n::<kiddo::SquaredEuclidean>(p, qty).into_iter().map(|n| n.item as u32).collect()
         })
         .collect();
-    let centroid = centroid(points);
-    let mut normals: Vec<V3> = neighbours.par_iter().map(|nb| pca_normal(points, nb)).collect();
+    let centroid = Vec3::from(centroid(points));
+    let mut normals: Vec<Vec3> = neighbours.par_iter().map(|nb| Vec3::from(pca_normal(points, nb))).collect();
     orient(points, &neighbours, &mut normals, centroid);
-    normals
+    normals.into_iter().map(V3::from).collect()
 }
 
 fn centroid(points: &[V3]) -> V3 {
@@ -77,7 +78,7 @@ fn pca_normal(points: &[V3], nb: &[u32]) -> V3 {
 }
 
 /// Propagates a consistent sign over the symmetric k-NN graph (Prim's algorithm per component).
-fn orient(points: &[V3], neighbours: &[Vec<u32>], normals: &mut [V3], centroid: V3) {
+fn orient(points: &[V3], neighbours: &[Vec<u32>], normals: &mut [Vec3], centroid: Vec3) {
     let n = points.len();
     // Symmetric adjacency in CSR form: the k-NN relation is not symmetric.
     let mut degree = vec![0u32; n + 1];
@@ -107,16 +108,13 @@ fn orient(points: &[V3], neighbours: &[Vec<u32>], normals: &mut [V3], centroid: 
     }
     // Points with degenerate neighbourhoods point away from the centroid.
     for (nrm, p) in normals.iter_mut().zip(points) {
-        if *nrm == [0.0; 3] {
-            *nrm = crate::math::normalize(sub(*p, centroid)).unwrap_or([0.0, 0.0, 1.0]);
+        if *nrm == Vec3::ZERO {
+            *nrm = (Vec3::from(*p) - centroid).normalize_or(Vec3::Z);
         }
     }
     // Components are seeded in order of decreasing distance from the centroid.
     let mut order: Vec<u32> = (0..n as u32).collect();
-    let dist2 = |i: u32| {
-        let d = sub(points[i as usize], centroid);
-        dot(d, d)
-    };
+    let dist2 = |i: u32| (Vec3::from(points[i as usize]) - centroid).length_squared();
     order.sort_by(|&a, &b| dist2(b).total_cmp(&dist2(a)).then(a.cmp(&b)));
     let mut done = vec![false; n];
     let mut heap: BinaryHeap<Reverse<(u32, u32, u32)>> = BinaryHeap::new();
@@ -125,8 +123,8 @@ fn orient(points: &[V3], neighbours: &[Vec<u32>], normals: &mut [V3], centroid: 
             continue;
         }
         let s = seed as usize;
-        if dot(normals[s], sub(points[s], centroid)) < 0.0 {
-            normals[s] = neg(normals[s]);
+        if normals[s].dot(Vec3::from(points[s]) - centroid) < 0.0 {
+            normals[s] = -normals[s];
         }
         done[s] = true;
         push_edges(s, &adj[start[s]..start[s + 1]], normals, &done, &mut heap);
@@ -136,8 +134,8 @@ fn orient(points: &[V3], neighbours: &[Vec<u32>], normals: &mut [V3], centroid: 
                 continue;
             }
             done[c] = true;
-            if dot(normals[c], normals[parent as usize]) < 0.0 {
-                normals[c] = neg(normals[c]);
+            if normals[c].dot(normals[parent as usize]) < 0.0 {
+                normals[c] = -normals[c];
             }
             push_edges(c, &adj[start[c]..start[c + 1]], normals, &done, &mut heap);
         }
@@ -148,13 +146,13 @@ fn orient(points: &[V3], neighbours: &[Vec<u32>], normals: &mut [V3], centroid: 
 fn push_edges(
     i: usize,
     adj: &[u32],
-    normals: &[V3],
+    normals: &[Vec3],
     done: &[bool],
     heap: &mut BinaryHeap<Reverse<(u32, u32, u32)>>,
 ) {
     for &j in adj {
         if !done[j as usize] {
-            let w = (1.0 - dot(normals[i], normals[j as usize]).abs()).max(0.0);
+            let w = (1.0 - normals[i].dot(normals[j as usize]).abs()).max(0.0);
             heap.push(Reverse((w.to_bits(), i as u32, j)));
         }
     }
@@ -178,12 +176,12 @@ mod tests {
             .collect();
         let normals = estimate_normals(&pts, 12);
         for (p, nrm) in pts.iter().zip(&normals) {
-            let radial = crate::math::normalize(sub(*p, [5.0, 0.0, 0.0])).unwrap();
-            assert!(dot(radial, *nrm) > 0.98, "normal {nrm:?} at {p:?}");
+            let radial = (Vec3::from(*p) - Vec3::new(5.0, 0.0, 0.0)).normalize();
+            assert!(radial.dot(Vec3::from(*nrm)) > 0.98, "normal {nrm:?} at {p:?}");
         }
         assert!(estimate_normals(&[], 8).is_empty());
         // Coincident points do not panic.
         let same = estimate_normals(&[[1.0, 1.0, 1.0]; 5], 8);
-        assert!(same.iter().all(|n| (crate::math::norm(*n) - 1.0).abs() < 1e-5));
+        assert!(same.iter().all(|&n| (Vec3::from(n).length() - 1.0).abs() < 1e-5));
     }
 }
