@@ -21,7 +21,6 @@
 pub mod camera;
 pub(crate) mod coords;
 pub mod density;
-pub(crate) mod eigen;
 pub mod error;
 pub mod frame;
 pub mod fsio;

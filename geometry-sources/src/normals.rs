@@ -18,10 +18,10 @@ use std::collections::BinaryHeap;
 use std::num::NonZero;
 
 use glam::Vec3;
+use nalgebra::{Matrix3, SymmetricEigen};
 use rayon::prelude::*;
 
 use crate::coords::V3;
-use crate::eigen::smallest_eigenvector;
 
 /// Estimates outward unit normals for `points` from their `k` nearest neighbours (`k >= 3`,
 /// including the point itself). Deterministic. Points whose neighbourhood is degenerate (all
@@ -72,9 +72,26 @@ fn pca_normal(points: &[V3], nb: &[u32]) -> V3 {
     if cov.iter().flatten().all(|&x| x == 0.0) {
         return [0.0; 3];
     }
-    let e = smallest_eigenvector(cov);
+    let Some(e) = smallest_eigenvector(cov) else { return [0.0; 3] };
     let len = (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt();
     if len > 0.0 && len.is_finite() { e.map(|x| (x / len) as f32) } else { [0.0; 3] }
+}
+
+/// Iterations after which [`smallest_eigenvector`] gives up (nalgebra's default is no limit). A 3×3
+/// matrix converges in a handful, so the cap only guards against an input that never does.
+const EIGEN_MAX_ITERATIONS: usize = 100;
+
+/// Unit eigenvector of the smallest eigenvalue of the symmetric matrix whose upper triangle is
+/// `upper` (the lower one is not read), `None` if the solver does not converge. Its sign is
+/// arbitrary: [`orient`] chooses every normal's sign, comparing only signs of dot products, so the
+/// result does not depend on it. For a repeated smallest eigenvalue any unit vector of the
+/// eigenspace may be returned.
+fn smallest_eigenvector(upper: [[f64; 3]; 3]) -> Option<[f64; 3]> {
+    // nalgebra reads the lower triangle: mirror the upper one into it.
+    let m = Matrix3::from_fn(|r, c| upper[r.min(c)][r.max(c)]);
+    let eigen = SymmetricEigen::try_new(m, f64::EPSILON, EIGEN_MAX_ITERATIONS)?;
+    let v = eigen.eigenvectors.column(eigen.eigenvalues.imin());
+    Some([v[0], v[1], v[2]])
 }
 
 /// Propagates a consistent sign over the symmetric k-NN graph (Prim's algorithm per component).
@@ -160,7 +177,35 @@ fn push_edges(
 
 #[cfg(test)]
 mod tests {
+    use glam::{DMat3, DVec3};
+
     use super::*;
+
+    #[test]
+    fn finds_the_smallest_eigenvector_from_the_upper_triangle() {
+        // Diagonal, permuted.
+        let e = smallest_eigenvector([[3.0, 0.0, 0.0], [0.0, 0.5, 0.0], [0.0, 0.0, 2.0]]).unwrap();
+        assert!((e[1].abs() - 1.0).abs() < 1e-12);
+        // A rotated diagonal matrix R diag(5, 2, 0.1) R^T with a known smallest eigenvector; its
+        // lower triangle is overwritten with garbage, which must not be read.
+        let n = DVec3::new(1.0, 2.0, -2.0).normalize();
+        let u = DVec3::new(2.0, 1.0, 2.0) / 3.0; // orthogonal to n
+        let w = n.cross(u);
+        let m: [[f64; 3]; 3] = std::array::from_fn(|r| {
+            std::array::from_fn(|c| 5.0 * u[r] * u[c] + 2.0 * w[r] * w[c] + 0.1 * n[r] * n[c])
+        });
+        let mut upper = m;
+        (upper[1][0], upper[2][0], upper[2][1]) = (7.0, -3.0, 11.0);
+        let e = DVec3::from(smallest_eigenvector(upper).unwrap());
+        assert!((e.dot(n).abs() - 1.0).abs() < 1e-9, "{e:?} vs {n:?}");
+        let me = DMat3::from_cols_array_2d(&m) * e; // m is symmetric: rows or columns alike
+        assert!((me - 0.1 * e).abs().max_element() < 1e-9);
+        // Degenerate inputs return a unit vector without panicking.
+        for m in [[[0.0; 3]; 3], [[1.0; 3]; 3]] {
+            let e = DVec3::from(smallest_eigenvector(m).unwrap());
+            assert!((e.length() - 1.0).abs() < 1e-9);
+        }
+    }
 
     #[test]
     fn sphere_normals_are_radial_and_outward() {
