@@ -46,10 +46,10 @@ use serde::Serialize;
 
 use crate::enclaves::absorb_enclaves;
 use crate::error::AtlasError;
+use crate::geom::signed_area2_2d;
 use crate::pack::AtlasLayout;
 use crate::untangle::{UntangleReport, untangle};
 use crate::uvstats::{UvStats, analyse_uv};
-use crate::vecmath::signed_area2_2d;
 
 /// The per-vertex network outputs a bake reads (`V` vertices, `n` charts, row-major).
 #[derive(Clone, Copy, Debug)]

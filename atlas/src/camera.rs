@@ -4,13 +4,14 @@
 //! the right and `y` downwards, pixel `(x, y)` has its centre at `(x + 0.5, y + 0.5)`. *Depth* is the
 //! view-space distance along the optical axis (not the ray length), positive in front of the camera.
 
+use glam::DVec3;
 use nuvo_geometry::Aabb;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
 use crate::error::AtlasError;
-use crate::vecmath::{V3, cross, dot, normalize, sub, v3};
+use crate::geom::to_dvec3;
 
 /// Vertical field of view of [`orbit_views`], in degrees.
 pub const DEFAULT_FOV_Y_DEG: f32 = 40.0;
@@ -49,7 +50,7 @@ impl Camera {
         width: u32,
         height: u32,
     ) -> Result<Self, AtlasError> {
-        let d = crate::vecmath::norm(sub(v3(target), v3(eye)));
+        let d = to_dvec3(target).distance(to_dvec3(eye));
         let cam = Camera { eye, target, up, fov_y_deg, width, height, near: (d * 1e-3) as f32 };
         cam.check()?;
         Ok(cam)
@@ -72,9 +73,9 @@ impl Camera {
         if self.eye.iter().chain(&self.target).chain(&self.up).any(|c| !c.is_finite()) {
             return bad("eye, target and up must be finite".into());
         }
-        match normalize(sub(v3(self.target), v3(self.eye))) {
+        match (to_dvec3(self.target) - to_dvec3(self.eye)).try_normalize() {
             None => bad("eye and target coincide".into()),
-            Some(f) if normalize(cross(f, v3(self.up))).is_none() => {
+            Some(f) if f.cross(to_dvec3(self.up)).try_normalize().is_none() => {
                 bad("up is parallel to the view direction".into())
             }
             Some(_) => Ok(()),
@@ -91,10 +92,10 @@ impl Camera {
 /// A camera prepared for projecting many points: its orthonormal frame and focal length.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Projector {
-    eye: V3,
-    right: V3,
-    up: V3,
-    forward: V3,
+    eye: DVec3,
+    right: DVec3,
+    up: DVec3,
+    forward: DVec3,
     focal_px: f64,
     cx: f64,
     cy: f64,
@@ -104,10 +105,10 @@ pub(crate) struct Projector {
 impl Projector {
     /// Assumes `cam.check()` passed (degenerate frames project nothing rather than NaN).
     pub(crate) fn new(cam: &Camera) -> Self {
-        let eye = v3(cam.eye);
-        let forward = normalize(sub(v3(cam.target), eye)).unwrap_or([0.0, 0.0, -1.0]);
-        let right = normalize(cross(forward, v3(cam.up))).unwrap_or([1.0, 0.0, 0.0]);
-        let up = cross(right, forward);
+        let eye = to_dvec3(cam.eye);
+        let forward = (to_dvec3(cam.target) - eye).normalize_or(DVec3::NEG_Z);
+        let right = forward.cross(to_dvec3(cam.up)).normalize_or(DVec3::X);
+        let up = right.cross(forward);
         let focal_px = 0.5 * cam.height as f64 / (0.5 * (cam.fov_y_deg as f64).to_radians()).tan();
         Projector {
             eye,
@@ -122,13 +123,13 @@ impl Projector {
     }
 
     pub(crate) fn project(&self, p: [f32; 3]) -> Option<[f32; 3]> {
-        let d = sub(v3(p), self.eye);
-        let z = dot(d, self.forward);
+        let d = to_dvec3(p) - self.eye;
+        let z = d.dot(self.forward);
         if z.is_nan() || z < self.near {
             return None;
         }
         let s = self.focal_px / z;
-        Some([(self.cx + s * dot(d, self.right)) as f32, (self.cy - s * dot(d, self.up)) as f32, z as f32])
+        Some([(self.cx + s * d.dot(self.right)) as f32, (self.cy - s * d.dot(self.up)) as f32, z as f32])
     }
 }
 
@@ -138,7 +139,7 @@ impl Projector {
 /// `(bounds, count, seed, size)` → same cameras, on every machine (ChaCha8).
 pub fn orbit_views(bounds: &Aabb, count: usize, seed: u64, width: u32, height: u32) -> Vec<Camera> {
     let centre = bounds.center();
-    let half_diag = crate::vecmath::norm(sub(v3(bounds.max), v3(bounds.min))) * 0.5;
+    let half_diag = to_dvec3(bounds.max).distance(to_dvec3(bounds.min)) * 0.5;
     let radius = if half_diag > 0.0 && half_diag.is_finite() { half_diag } else { 1.0 };
     let half_y = 0.5 * (DEFAULT_FOV_Y_DEG as f64).to_radians();
     let half_x = (half_y.tan() * width as f64 / height.max(1) as f64).atan();

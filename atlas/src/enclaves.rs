@@ -33,9 +33,9 @@
 
 use nuvo_geometry::TriMesh;
 
+use crate::geom::signed_area2_2d;
 use crate::partuv::face_areas_3d;
 use crate::uvstats::{Dsu, degenerate_3d_faces, faces_by_edge};
-use crate::vecmath::signed_area2_2d;
 
 /// Moves every enclave (module docs) of `face_chart` to its surrounding chart where the check
 /// passes; `chart_uv(v, c)` is chart `c`'s UV at vertex `v`, and `allowed(f, c)` must hold for

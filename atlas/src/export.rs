@@ -26,7 +26,7 @@ use nuvo_geometry::{Similarity, TriMesh, UvLayer};
 
 use crate::error::AtlasError;
 use crate::error::write_atomic;
-use crate::vecmath::vertex_normals;
+use crate::geom::vertex_normals;
 
 /// Name of the single material of exported meshes.
 pub const MATERIAL_NAME: &str = "nuvo_atlas";

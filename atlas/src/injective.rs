@@ -95,9 +95,9 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::error::AtlasError;
+use crate::geom::to_dvec3;
 use crate::refine::{Frame, area2, centroid_of, island_unknowns, write_back};
 use crate::uvstats::{degenerate_3d_faces, faces_by_edge, require_uv, uv_islands};
-use crate::vecmath::{norm, sub, v3};
 
 /// Weight of a 3-D-degenerate face's equilateral rest shape, relative to its area.
 pub const DEGENERATE_WEIGHT: f64 = 1e-3;
@@ -591,9 +591,9 @@ impl Patch {
             .collect();
         let (mut len, mut edges) = (0.0, 0usize);
         for &f in faces {
-            let p = ctx.mesh.corners(f as usize).map(v3);
+            let p = ctx.mesh.corners(f as usize).map(to_dvec3);
             for k in 0..3 {
-                let l = norm(sub(p[(k + 1) % 3], p[k]));
+                let l = p[(k + 1) % 3].distance(p[k]);
                 if l.is_finite() {
                     len += l;
                     edges += 1;

@@ -83,11 +83,12 @@ use std::collections::HashMap;
 
 use rayon::prelude::*;
 
+use glam::DVec3;
 use nuvo_geometry::{TriMesh, UvLayer};
 
 use crate::error::AtlasError;
+use crate::geom::to_dvec3;
 use crate::uvstats::{DEGENERATE_AREA_REL, degenerate_3d_faces, face_uv_area2, require_uv, uv_charts};
-use crate::vecmath::{cross, norm, sub, v3};
 
 mod shapes;
 use shapes::ShapePlaced;
@@ -260,8 +261,8 @@ impl Layout {
                 if !degenerate_3d[f] {
                     area_uv[i as usize] += face_uv_area2(uv, f).abs() * 0.5;
                 }
-                let [a, b, c] = mesh.corners(f).map(v3);
-                area_3d[i as usize] += 0.5 * norm(cross(sub(b, a), sub(c, a)));
+                let [a, b, c] = mesh.corners(f).map(to_dvec3);
+                area_3d[i as usize] += 0.5 * (b - a).cross(c - a).length();
                 if let Some(g) = face_metric([a, b, c], t.map(|j| uv.coords[j as usize])) {
                     metrics[i as usize].push(g);
                 }
@@ -274,8 +275,8 @@ impl Layout {
                 })
             })
             .collect();
-        let eps_3d =
-            DEGENERATE_AREA_REL * mesh.bounds().map_or(0.0, |b| norm(sub(v3(b.max), v3(b.min))).powi(2));
+        let eps_3d = DEGENERATE_AREA_REL
+            * mesh.bounds().map_or(0.0, |b| to_dvec3(b.max).distance(to_dvec3(b.min)).powi(2));
         let eps_uv = DEGENERATE_AREA_REL * uv_square_side(uv).powi(2);
         // Each island's faces in its own numbering of its coordinates (the order of `members`).
         let mut local = Vec::with_capacity(coords.len());
@@ -422,18 +423,17 @@ const TURN_SHEAR: f64 = 5e-4;
 /// The metric `[T·T, T·B, B·B]` of a face's affine UV→3-D map, `T = ∂p/∂u`, `B = ∂p/∂v`, up to
 /// the common factor `1/det²` (which |cos(T, B)| ignores); `None` when the face is degenerate in
 /// 3-D or so thin in UV (`|det| ≤ 1e-6 · (|e₁|² + |e₂|²)`) that its axes mean nothing.
-fn face_metric(p: [[f64; 3]; 3], t: [[f32; 2]; 3]) -> Option<[f64; 3]> {
-    let (e1, e2) = (sub(p[1], p[0]), sub(p[2], p[0]));
+fn face_metric(p: [DVec3; 3], t: [[f32; 2]; 3]) -> Option<[f64; 3]> {
+    let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
     let d = |k: usize, c: usize| t[k][c] as f64 - t[0][c] as f64;
     let (du1, dv1, du2, dv2) = (d(1, 0), d(1, 1), d(2, 0), d(2, 1));
     let det = du1 * dv2 - du2 * dv1;
     if det.abs() <= 1e-6 * (du1 * du1 + dv1 * dv1 + du2 * du2 + dv2 * dv2) {
         return None;
     }
-    let tt = [0, 1, 2].map(|k| e1[k] * dv2 - e2[k] * dv1);
-    let bt = [0, 1, 2].map(|k| e2[k] * du1 - e1[k] * du2);
-    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-    let g = [dot(tt, tt), dot(tt, bt), dot(bt, bt)];
+    let tt = e1 * dv2 - e2 * dv1;
+    let bt = e2 * du1 - e1 * du2;
+    let g = [tt.dot(tt), tt.dot(bt), bt.dot(bt)];
     (g[0] > 0.0 && g[2] > 0.0 && g.iter().all(|x| x.is_finite())).then_some(g)
 }
 

@@ -55,11 +55,11 @@ use nuvo_geometry::{TriMesh, UvLayer};
 use serde::Serialize;
 
 use crate::error::AtlasError;
+use crate::geom::to_dvec3;
 use crate::injective::{TriangleGrid, mean_edge};
 use crate::partuv::{area_distortion, face_areas_3d};
 use crate::refine::area2;
 use crate::uvstats::{require_uv, uv_islands};
-use crate::vecmath::{cross, norm, sub, v3};
 
 /// Passes of seam smoothing over every face, at most (each pass that moves nothing ends it).
 pub const SMOOTHING_PASSES: usize = 8;
@@ -155,7 +155,7 @@ pub fn join_small_islands(mesh: &TriMesh, opts: &JoinOptions) -> Result<Joined, 
             let t = mesh.triangles[f as usize];
             for k in 0..3 {
                 let (a, b) = (t[k], t[(k + 1) % 3]);
-                let len = norm(sub(v3(mesh.positions[a as usize]), v3(mesh.positions[b as usize])));
+                let len = to_dvec3(mesh.positions[a as usize]).distance(to_dvec3(mesh.positions[b as usize]));
                 for &(g, _) in &edge_faces[&(a.min(b), a.max(b))] {
                     let l = work.label[g as usize];
                     if l as usize != s {
@@ -300,7 +300,8 @@ impl Work<'_> {
             let t = self.mesh.triangles[f as usize];
             for k in 0..3 {
                 let (a, b) = (t[k], t[(k + 1) % 3]);
-                let len = norm(sub(v3(self.mesh.positions[a as usize]), v3(self.mesh.positions[b as usize])));
+                let len = to_dvec3(self.mesh.positions[a as usize])
+                    .distance(to_dvec3(self.mesh.positions[b as usize]));
                 for &(g, j) in &edge_faces[&(a.min(b), a.max(b))] {
                     if self.label[g as usize] == nb {
                         shared.push((g, j));
@@ -351,22 +352,22 @@ impl Work<'_> {
                         let k = (0..3).find(|k| !known.contains(k)).unwrap();
                         let (a, b, c) = (t[(k + 1) % 3], t[(k + 2) % 3], t[k]);
                         let (ua, ub) = (value[&a], value[&b]);
-                        let pos = |v: u32| v3(self.mesh.positions[v as usize]);
-                        let (e, w) = (sub(pos(b), pos(a)), sub(pos(c), pos(a)));
-                        let len2 = e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
+                        let pos = |v: u32| to_dvec3(self.mesh.positions[v as usize]);
+                        let (e, w) = (pos(b) - pos(a), pos(c) - pos(a));
+                        let len2 = e.length_squared();
                         if len2 <= 0.0 {
                             return None;
                         }
                         // `c` in the frame of edge a→b: along it and to its left (a, b, c CCW).
-                        let along = (e[0] * w[0] + e[1] * w[1] + e[2] * w[2]) / len2;
+                        let along = e.dot(w) / len2;
                         let d = [ub[0] - ua[0], ub[1] - ua[1]];
                         let d_len = d[0].hypot(d[1]);
                         if d_len <= 0.0 {
                             return None;
                         }
                         let left = match growth {
-                            Growth::Similar => norm(cross(e, w)) / len2,
-                            Growth::Density => norm(cross(e, w)) / len2.sqrt() * scale / d_len,
+                            Growth::Similar => e.cross(w).length() / len2,
+                            Growth::Density => e.cross(w).length() / len2.sqrt() * scale / d_len,
                         };
                         let n = [-d[1] * orient, d[0] * orient];
                         let uc = [ua[0] + along * d[0] + left * n[0], ua[1] + along * d[1] + left * n[1]];
@@ -476,8 +477,8 @@ impl Work<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geom::to_dvec3;
     use crate::uvstats::uv_charts;
-    use crate::vecmath::{norm, sub, v3};
 
     /// A strip of `k` unit squares along x (two faces each), UVs `0.1 · (x, y)`, with the last
     /// square's two faces on UVs of their own (shifted by `shift`, a separate island).
@@ -603,7 +604,7 @@ mod tests {
         faces
             .iter()
             .filter(|(_, fs)| fs.len() == 2 && chart[fs[0]] != chart[fs[1]])
-            .map(|(&(a, b), _)| norm(sub(v3(m.positions[a as usize]), v3(m.positions[b as usize]))))
+            .map(|(&(a, b), _)| to_dvec3(m.positions[a as usize]).distance(to_dvec3(m.positions[b as usize])))
             .sum()
     }
 

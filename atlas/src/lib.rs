@@ -32,6 +32,7 @@ pub mod enclaves;
 pub mod error;
 pub mod export;
 mod font;
+mod geom;
 pub mod gltf_scene;
 pub mod injective;
 pub mod islands;
@@ -49,7 +50,6 @@ pub mod render;
 mod testmesh;
 pub mod untangle;
 pub mod uvstats;
-mod vecmath;
 
 pub use bake::{BakeOptions, Baked, ChartFields, RoundTrip, bake};
 pub use camera::{Camera, orbit_views};

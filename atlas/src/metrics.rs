@@ -36,18 +36,19 @@
 //! directions, seed 0, 40° vertical field of view, the bounding sphere filling the frame), 800 × 800
 //! pixels, UV raster of 1024² for [`UvStats`].
 
+use glam::DVec3;
 use nuvo_geometry::{TriMesh, UvLayer};
 use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::camera::{Camera, MAX_IMAGE_SIDE, orbit_views};
 use crate::error::AtlasError;
+use crate::geom::to_dvec3;
 use crate::partuv::{PartUvMetrics, partuv_metrics};
 use crate::render::{GBuffer, render};
 use crate::uvstats::{
     DEFAULT_UV_RASTER, DEGENERATE_UV_AREA, UvStats, analyse_uv, degenerate_3d_faces, require_uv,
 };
-use crate::vecmath::{V3, cross, dot, norm, scale, sub, v3};
 
 /// Options of [`evaluate`]. `Default` gives the documented defaults.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
@@ -238,9 +239,9 @@ fn face_distortion(mesh: &TriMesh, uv: &UvLayer) -> Vec<Option<[f32; 2]>> {
             if degenerate[f] {
                 return None;
             }
-            let [a, b, c] = mesh.corners(f).map(v3);
-            let (e1, e2) = (sub(b, a), sub(c, a));
-            let area3 = 0.5 * norm(cross(e1, e2));
+            let [a, b, c] = mesh.corners(f).map(to_dvec3);
+            let (e1, e2) = (b - a, c - a);
+            let area3 = 0.5 * e1.cross(e2).length();
             let [ua, ub, uc] = uv.triangles[f].map(|i| uv.coords[i as usize].map(|x| x as f64));
             let (du1, dv1, du2, dv2) = (ub[0] - ua[0], ub[1] - ua[1], uc[0] - ua[0], uc[1] - ua[1]);
             let area_uv = 0.5 * (du1 * dv2 - du2 * dv1).abs();
@@ -259,13 +260,13 @@ fn face_distortion(mesh: &TriMesh, uv: &UvLayer) -> Vec<Option<[f32; 2]>> {
 /// Jacobian of its affine UV→3-D map. `None` when `T` or `B` vanishes (a UV-degenerate triangle, or
 /// one degenerate in 3-D along a UV axis). The one formula of Conformal here and of the angular
 /// score in [`crate::partuv`].
-pub(crate) fn abs_cos_tangents(e1: V3, e2: V3, duv: [f64; 4]) -> Option<f64> {
+pub(crate) fn abs_cos_tangents(e1: DVec3, e2: DVec3, duv: [f64; 4]) -> Option<f64> {
     let [du1, dv1, du2, dv2] = duv;
     // T, B up to the common factor 1/det, which |cos| ignores.
-    let t = sub(scale(e1, dv2), scale(e2, dv1));
-    let bt = sub(scale(e2, du1), scale(e1, du2));
-    let den = norm(t) * norm(bt);
-    (den > 0.0).then(|| (dot(t, bt) / den).abs().min(1.0))
+    let t = e1 * dv2 - e2 * dv1;
+    let bt = e2 * du1 - e1 * du2;
+    let den = t.length() * bt.length();
+    (den > 0.0).then(|| (t.dot(bt) / den).abs().min(1.0))
 }
 
 /// The scores of one rendered view, `None` when it has no measurable pixel.

@@ -60,6 +60,7 @@ use nuvo_geometry::{TriMesh, UvLayer};
 use serde::Serialize;
 
 use crate::error::AtlasError;
+use crate::geom::to_dvec3;
 use crate::injective::shortest_paths;
 use crate::islands::{
     IslandPacking, SHAPES_UP_TO, convex_hull, min_area_rotation, pack_islands, packs_at_scale, rotated,
@@ -67,7 +68,6 @@ use crate::islands::{
 use crate::partuv::face_areas_3d;
 use crate::refine::island_unknowns;
 use crate::uvstats::{Dsu, face_uv_area2, faces_by_edge, require_uv, uv_charts, uv_islands};
-use crate::vecmath::{norm, sub, v3};
 
 /// Boundary vertices sampled per island for neck candidates.
 pub const SAMPLES: usize = 48;
@@ -269,8 +269,8 @@ fn neck_cuts(mesh: &TriMesh, uv: &UvLayer, faces: &[u32], count: usize) -> Vec<(
         }
     }
     let length3 = |a: u32, b: u32| {
-        let at = |v: u32| v3(mesh.positions[vertex[v as usize] as usize]);
-        norm(sub(at(a), at(b)))
+        let at = |v: u32| to_dvec3(mesh.positions[vertex[v as usize] as usize]);
+        at(a).distance(at(b))
     };
     let dist = |a: u32, b: u32| {
         let (p, q) = (pos[a as usize], pos[b as usize]);

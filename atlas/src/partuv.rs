@@ -73,9 +73,9 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::error::AtlasError;
+use crate::geom::to_dvec3;
 use crate::metrics::abs_cos_tangents;
 use crate::uvstats::{DEGENERATE_UV_AREA, degenerate_3d_faces, face_uv_area2, require_uv, uv_charts};
-use crate::vecmath::{cross, norm, sub, v3};
 
 /// The clip of a face's folded area ratio `max(r, 1/r)` in the area distortions.
 pub const AREA_RATIO_CLIP: f64 = 10.0;
@@ -182,8 +182,8 @@ pub(crate) fn face_areas_3d(mesh: &TriMesh) -> Vec<f64> {
     (0..mesh.triangles.len())
         .into_par_iter()
         .map(|f| {
-            let [a, b, c] = mesh.corners(f).map(v3);
-            0.5 * norm(cross(sub(b, a), sub(c, a)))
+            let [a, b, c] = mesh.corners(f).map(to_dvec3);
+            0.5 * (b - a).cross(c - a).length()
         })
         .collect()
 }
@@ -237,13 +237,9 @@ fn angular_score(mesh: &TriMesh, uv: &UvLayer, square: &AtlasSquare) -> (f64, us
             if degenerate_3d[f] || 0.5 * face_uv_area2(uv, f).abs() / unit <= DEGENERATE_UV_AREA {
                 return None;
             }
-            let [a, b, c] = mesh.corners(f).map(v3);
+            let [a, b, c] = mesh.corners(f).map(to_dvec3);
             let [ua, ub, uc] = uv.triangles[f].map(|i| uv.coords[i as usize].map(|x| x as f64));
-            abs_cos_tangents(
-                sub(b, a),
-                sub(c, a),
-                [ub[0] - ua[0], ub[1] - ua[1], uc[0] - ua[0], uc[1] - ua[1]],
-            )
+            abs_cos_tangents(b - a, c - a, [ub[0] - ua[0], ub[1] - ua[1], uc[0] - ua[0], uc[1] - ua[1]])
         })
         .collect();
     let (sum, n) = abs_cos.iter().flatten().fold((0.0, 0usize), |(s, n), &c| (s + c, n + 1));

@@ -6,6 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
+use glam::DVec3;
 /// The RGB image type of every picture (re-exported so users need not depend on `image`).
 pub use image::RgbImage;
 use image::{ImageEncoder, Rgb, codecs::png::PngEncoder};
@@ -16,11 +17,11 @@ use crate::camera::{Camera, MAX_IMAGE_SIDE, orbit_views};
 use crate::error::AtlasError;
 use crate::error::write_atomic;
 use crate::font::{GLYPH, draw_text};
+use crate::geom::{to_dvec3, vertex_normals};
 use crate::pack::AtlasLayout;
 use crate::raster::raster_parallel;
 use crate::render::render;
 use crate::uvstats::{require_uv, uv_charts, uv_pixels};
-use crate::vecmath::{dot, normalize, sub, v3, vertex_normals};
 
 /// Background of renders and of empty UV space.
 const BACKGROUND: [u8; 3] = [40, 40, 46];
@@ -143,7 +144,7 @@ pub fn render_textured(
         .iter()
         .map(|cam| {
             let g = render(mesh, cam)?;
-            let eye = v3(cam.eye);
+            let eye = to_dvec3(cam.eye);
             let pixels: Vec<[u8; 3]> = g
                 .pixels
                 .par_iter()
@@ -153,10 +154,10 @@ pub fn render_textured(
                     let lerp3 = |a: [[f32; 3]; 3]| -> [f64; 3] {
                         std::array::from_fn(|k| (0..3).map(|c| p.bary[c] as f64 * a[c][k] as f64).sum())
                     };
-                    let point = lerp3(mesh.corners(f));
-                    let normal = lerp3(mesh.triangles[f].map(|v| normals[v as usize]));
-                    let light = match (normalize(normal), normalize(sub(eye, point))) {
-                        (Some(n), Some(l)) => 0.25 + 0.75 * dot(n, l).abs(),
+                    let point = DVec3::from(lerp3(mesh.corners(f)));
+                    let normal = DVec3::from(lerp3(mesh.triangles[f].map(|v| normals[v as usize])));
+                    let light = match (normal.try_normalize(), (eye - point).try_normalize()) {
+                        (Some(n), Some(l)) => 0.25 + 0.75 * n.dot(l).abs(),
                         _ => 0.6,
                     };
                     let t = interpolate_uv(uv, f, p.bary);

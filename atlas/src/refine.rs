@@ -82,12 +82,12 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::error::AtlasError;
+use crate::geom::to_dvec3;
 use crate::metrics::abs_cos_tangents;
 use crate::partuv::partuv_metrics;
 use crate::uvstats::{
     DEGENERATE_UV_AREA, Dsu, Orientation, degenerate_3d_faces, orientation, require_uv, uv_islands,
 };
-use crate::vecmath::{cross, dot, norm, sub, v3};
 
 /// Islands with fewer faces than this are left as they are.
 pub const MIN_ISLAND_FACES: usize = 3;
@@ -226,15 +226,15 @@ pub(crate) struct Frame {
 impl Frame {
     /// The frame of face `f`, `None` when it gets no weight (module docs).
     pub(crate) fn of(mesh: &TriMesh, f: usize) -> Option<Frame> {
-        let [a, b, c] = mesh.corners(f).map(v3);
-        let (e1, e2) = (sub(b, a), sub(c, a));
-        let l1 = norm(e1);
-        let n2 = norm(cross(e1, e2)); // twice the area
+        let [a, b, c] = mesh.corners(f).map(to_dvec3);
+        let (e1, e2) = (b - a, c - a);
+        let l1 = e1.length();
+        let n2 = e1.cross(e2).length(); // twice the area
         if !(l1 > 0.0 && n2 > 0.0 && n2.is_finite()) {
             return None;
         }
-        let x = [[0.0, 0.0], [l1, 0.0], [dot(e1, e2) / l1, n2 / l1]];
-        let cot = [dot(e1, e2) / n2, dot(sub(a, b), sub(c, b)) / n2, dot(sub(a, c), sub(b, c)) / n2];
+        let x = [[0.0, 0.0], [l1, 0.0], [e1.dot(e2) / l1, n2 / l1]];
+        let cot = [e1.dot(e2) / n2, (a - b).dot(c - b) / n2, (a - c).dot(b - c) / n2];
         cot.iter().all(|c| c.is_finite() && c.abs() <= MAX_COT).then_some(Frame { x, cot })
     }
 
@@ -374,9 +374,9 @@ impl Context<'_> {
             if self.degenerate[f as usize] {
                 continue;
             }
-            let [a, b, c] = self.mesh.corners(f as usize).map(v3);
+            let [a, b, c] = self.mesh.corners(f as usize).map(to_dvec3);
             let duv = [t[1][0] - t[0][0], t[1][1] - t[0][1], t[2][0] - t[0][0], t[2][1] - t[0][1]];
-            if let Some(c) = abs_cos_tangents(sub(b, a), sub(c, a), duv) {
+            if let Some(c) = abs_cos_tangents(b - a, c - a, duv) {
                 sum += c;
                 n += 1;
             }

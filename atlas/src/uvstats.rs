@@ -27,13 +27,14 @@
 
 use std::collections::HashMap;
 
+use glam::DVec3;
 use nuvo_geometry::{TriMesh, UvLayer};
 use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::error::AtlasError;
+use crate::geom::{signed_area2_2d, to_dvec3};
 use crate::raster::{Tri2, raster_parallel, rasterize_triangle};
-use crate::vecmath::{cross, dot, norm, signed_area2_2d, sub, v3};
 
 /// UV area at or below which a face counts as degenerate in UV (not flipped, not measurable).
 pub const DEGENERATE_UV_AREA: f64 = 1e-12;
@@ -191,16 +192,16 @@ pub fn creased_faces(mesh: &TriMesh) -> Vec<bool> {
 
 /// [`creased_faces`] on the mesh's edge uses.
 fn creases_along(edges: &EdgeUses, mesh: &TriMesh) -> Vec<bool> {
-    let normals: Vec<[f64; 3]> = (0..mesh.triangles.len())
+    let normals: Vec<DVec3> = (0..mesh.triangles.len())
         .into_par_iter()
         .map(|f| {
-            let [a, b, c] = mesh.corners(f).map(v3);
-            cross(sub(b, a), sub(c, a))
+            let [a, b, c] = mesh.corners(f).map(to_dvec3);
+            (b - a).cross(c - a)
         })
         .collect();
     let mut creased = vec![false; mesh.triangles.len()];
     for (x, y) in edges.pairs() {
-        if dot(normals[x.face as usize], normals[y.face as usize]) < 0.0 {
+        if normals[x.face as usize].dot(normals[y.face as usize]) < 0.0 {
             creased[x.face as usize] = true;
             creased[y.face as usize] = true;
         }
@@ -274,16 +275,13 @@ pub(crate) fn faces_by_edge(faces: impl Iterator<Item = (u32, [u32; 3])>) -> Has
 
 /// Whether each face is degenerate in 3-D ([`DEGENERATE_AREA_REL`]).
 pub(crate) fn degenerate_3d_faces(mesh: &TriMesh) -> Vec<bool> {
-    let diag2 = mesh.bounds().map_or(0.0, |b| {
-        let d = sub(v3(b.max), v3(b.min));
-        d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
-    });
+    let diag2 = mesh.bounds().map_or(0.0, |b| (to_dvec3(b.max) - to_dvec3(b.min)).length_squared());
     let eps = DEGENERATE_AREA_REL * diag2;
     (0..mesh.triangles.len())
         .into_par_iter()
         .map(|f| {
-            let [a, b, c] = mesh.corners(f).map(v3);
-            let area = 0.5 * norm(cross(sub(b, a), sub(c, a)));
+            let [a, b, c] = mesh.corners(f).map(to_dvec3);
+            let area = 0.5 * (b - a).cross(c - a).length();
             area.is_nan() || area <= eps
         })
         .collect()

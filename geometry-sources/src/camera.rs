@@ -19,12 +19,13 @@
 
 use std::path::{Path, PathBuf};
 
+use glam::Vec3;
 use rand::Rng;
 use serde::Deserialize;
 
+use crate::coords::V3;
 use crate::error::GeometryError;
 use crate::frame::{Aabb, Similarity};
-use crate::math::{V3, add, cross, is_finite, madd, norm, normalize, sub};
 use crate::registry::BuildContext;
 
 /// A ray; `dir` has unit length.
@@ -34,6 +35,13 @@ pub struct Ray {
     pub origin: V3,
     /// Unit direction.
     pub dir: V3,
+}
+
+impl Ray {
+    /// The point at distance `t` along the ray, `origin + t * dir`.
+    pub fn at(&self, t: f32) -> V3 {
+        (Vec3::from(self.origin) + t * Vec3::from(self.dir)).to_array()
+    }
 }
 
 /// A pinhole camera with a square image. Invariant: `forward`, `right`, `up` are orthonormal and
@@ -51,25 +59,33 @@ pub struct Camera {
 impl Camera {
     /// A camera at `position` looking at `target` with a full field of view of `fov_degrees`.
     pub fn look_at(position: V3, target: V3, fov_degrees: f32) -> Result<Camera, String> {
-        if !is_finite(position) || !is_finite(target) {
+        if !Vec3::from(position).is_finite() || !Vec3::from(target).is_finite() {
             return Err(format!("camera position {position:?} or look-at {target:?} is not finite"));
         }
         if !(fov_degrees > 0.0 && fov_degrees < 179.0) {
             return Err(format!("field of view {fov_degrees}° must be in (0, 179)"));
         }
-        let forward = normalize(sub(target, position))
+        let forward = (Vec3::from(target) - Vec3::from(position))
+            .try_normalize()
             .ok_or_else(|| format!("camera at {position:?} looks at itself"))?;
-        let world_up = if forward[1].abs() < 0.999 { [0.0, 1.0, 0.0] } else { [0.0, 0.0, 1.0] };
-        let right = normalize(cross(forward, world_up)).unwrap_or([1.0, 0.0, 0.0]);
-        let up = cross(right, forward);
-        Ok(Camera { position, forward, right, up, tan_half_fov: (0.5 * fov_degrees).to_radians().tan() })
+        let world_up = if forward.y.abs() < 0.999 { Vec3::Y } else { Vec3::Z };
+        let right = forward.cross(world_up).try_normalize().unwrap_or(Vec3::X);
+        let up = right.cross(forward);
+        Ok(Camera {
+            position,
+            forward: forward.to_array(),
+            right: right.to_array(),
+            up: up.to_array(),
+            tan_half_fov: (0.5 * fov_degrees).to_radians().tan(),
+        })
     }
 
     /// The ray through image point `(sx, sy)` in `[-1, 1]^2`.
     pub fn ray(&self, sx: f32, sy: f32) -> Ray {
         let t = self.tan_half_fov;
-        let d = madd(madd(self.forward, sx * t, self.right), sy * t, self.up);
-        Ray { origin: self.position, dir: normalize(d).unwrap_or(self.forward) }
+        let forward = Vec3::from(self.forward);
+        let d = forward + sx * t * Vec3::from(self.right) + sy * t * Vec3::from(self.up);
+        Ray { origin: self.position, dir: d.normalize_or(forward).to_array() }
     }
 
     /// The ray through a uniformly random image point.
@@ -178,7 +194,7 @@ impl CameraRig {
             CameraRig::Sphere { radius, jitter, fov_degrees } => {
                 let dir = random_unit_vector(rng);
                 let target: V3 = std::array::from_fn(|_| rng.random_range(-1.0..=1.0) * jitter);
-                let position = madd(target, *radius, dir);
+                let position = (Vec3::from(target) + *radius * Vec3::from(dir)).to_array();
                 let cam = Camera::look_at(position, target, *fov_degrees)
                     .unwrap_or_else(|_| Camera::look_at(position, [0.0; 3], 60.0).unwrap_or(FALLBACK));
                 cam.random_ray(rng)
@@ -212,7 +228,7 @@ const FALLBACK: Camera = Camera {
 
 /// Radius of the sphere around the origin that contains `bounds`.
 pub fn bounding_radius(bounds: &Aabb) -> f32 {
-    norm(std::array::from_fn(|k| bounds.min[k].abs().max(bounds.max[k].abs())))
+    Vec3::from_array(std::array::from_fn(|k| bounds.min[k].abs().max(bounds.max[k].abs()))).length()
 }
 
 /// Radius of the sphere around the origin holding 99.5% of the surface area of `mesh` (by triangle,
@@ -222,7 +238,9 @@ pub fn bounding_radius(bounds: &Aabb) -> f32 {
 /// still seen, from cameras on their side.
 pub fn area_radius(mesh: &crate::mesh::TriMesh) -> f32 {
     let mut r: Vec<(f32, f32)> = (0..mesh.triangles.len())
-        .map(|f| (mesh.corners(f).iter().map(|c| norm(*c)).fold(0.0, f32::max), mesh.face_area(f)))
+        .map(|f| {
+            (mesh.corners(f).iter().map(|&c| Vec3::from(c).length()).fold(0.0, f32::max), mesh.face_area(f))
+        })
         .filter(|&(_, a)| a > 0.0 && a.is_finite())
         .collect();
     let total: f64 = r.iter().map(|&(_, a)| f64::from(a)).sum();
@@ -305,7 +323,7 @@ pub fn load_camera_file(
             .map(|f| {
                 let m = &f.transform_matrix;
                 let pos = [m[0][3], m[1][3], m[2][3]];
-                (pos, add(pos, [-m[0][2], -m[1][2], -m[2][2]]), fov)
+                (pos, (Vec3::from(pos) + Vec3::new(-m[0][2], -m[1][2], -m[2][2])).to_array(), fov)
             })
             .collect()
     } else {
@@ -332,7 +350,6 @@ pub fn load_camera_file(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::math::dot;
     use rand::SeedableRng;
 
     #[test]
@@ -342,8 +359,8 @@ mod tests {
         let limit = (30f32.to_radians().tan() * 2f32.sqrt()).atan().cos();
         for _ in 0..1000 {
             let r = cam.random_ray(&mut rng);
-            assert!((norm(r.dir) - 1.0).abs() < 1e-5);
-            assert!(dot(r.dir, [0.0, 0.0, -1.0]) >= limit - 1e-5);
+            assert!((Vec3::from(r.dir).length() - 1.0).abs() < 1e-5);
+            assert!(Vec3::from(r.dir).dot(Vec3::NEG_Z) >= limit - 1e-5);
         }
     }
 
@@ -358,9 +375,9 @@ mod tests {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
         for _ in 0..100 {
             let r = rig.random_ray(&mut rng);
-            assert!((norm(r.origin) - 3.0).abs() < 0.2);
+            assert!((Vec3::from(r.origin).length() - 3.0).abs() < 0.2);
             // Pointing inwards: the centre is in front of the camera.
-            assert!(dot(r.dir, r.origin) < 0.0);
+            assert!(Vec3::from(r.dir).dot(Vec3::from(r.origin)) < 0.0);
         }
         let too_close = CameraOptions { radius: 1.5, ..Default::default() };
         let e = CameraRig::from_options(&too_close, &ctx, framed, &Similarity::IDENTITY, "t").unwrap_err();
@@ -375,7 +392,7 @@ mod tests {
         std::fs::write(&list, r#"[{"position": [10, 0, 6], "look_at": [10, 0, 0]}]"#).unwrap();
         let cams = load_camera_file(&list, &sim, None).unwrap();
         assert_eq!(cams[0].position, [0.0, 0.0, 3.0]);
-        assert!((dot(cams[0].forward, [0.0, 0.0, -1.0]) - 1.0).abs() < 1e-6);
+        assert!((Vec3::from(cams[0].forward).dot(Vec3::NEG_Z) - 1.0).abs() < 1e-6);
 
         let obj = dir.path().join("obj.json");
         std::fs::write(
@@ -399,7 +416,7 @@ mod tests {
         .unwrap();
         let c = load_camera_file(&nerf, &Similarity::IDENTITY, None).unwrap()[0];
         assert_eq!(c.position, [0.0, 0.0, 4.0]);
-        assert!((dot(c.forward, [0.0, 0.0, -1.0]) - 1.0).abs() < 1e-6);
+        assert!((Vec3::from(c.forward).dot(Vec3::NEG_Z) - 1.0).abs() < 1e-6);
 
         for (name, text, needle) in [
             ("typo.json", r#"[{"positon": [1,2,3], "look_at": [0,0,0]}]"#, "positon"),

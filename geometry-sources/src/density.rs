@@ -33,16 +33,17 @@
 
 use std::path::{Path, PathBuf};
 
+use glam::Vec3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::Deserialize;
 
 use crate::camera::{CameraOptions, CameraRig, Ray, bounding_radius};
+use crate::coords::V3;
 use crate::error::GeometryError;
 use crate::frame::{Aabb, Similarity};
 use crate::isosurface::{NodeGrid, marching_cubes};
-use crate::math::{V3, madd, neg, normalize, scale};
 use crate::mesh::TriMesh;
 use crate::npy::{Dtype, read_npy};
 use crate::options::{options_error, parse_options};
@@ -341,9 +342,9 @@ impl DensitySource {
     /// The point at `t` on `ray` with the normalised negative density gradient (or, where the
     /// gradient vanishes, the direction back to the camera).
     fn point(&self, ray: &Ray, t: f32) -> (V3, V3) {
-        let p = madd(ray.origin, t, ray.dir);
-        let n = normalize(neg(self.grid.gradient(p))).unwrap_or_else(|| scale(ray.dir, -1.0));
-        (p, n)
+        let p = ray.at(t);
+        let n = (-Vec3::from(self.grid.gradient(p))).normalize_or(-Vec3::from(ray.dir));
+        (p, n.to_array())
     }
 }
 

@@ -23,7 +23,7 @@ use std::hash::{BuildHasherDefault, Hasher};
 
 use rayon::prelude::*;
 
-use crate::math::V3;
+use crate::coords::V3;
 use crate::mesh::TriMesh;
 
 /// Cell layers (along the slowest axis) per slab extracted in parallel. Fixed, so the mesh does not

@@ -19,15 +19,14 @@
 #![warn(missing_docs)]
 
 pub mod camera;
+pub(crate) mod coords;
 pub mod density;
-pub(crate) mod eigen;
 pub mod error;
 pub mod frame;
 pub mod fsio;
 pub mod gltf_io;
 pub mod isosurface;
 pub mod load;
-pub(crate) mod math;
 pub mod mesh;
 pub mod mesh_source;
 pub mod normals;
@@ -47,10 +46,10 @@ pub mod testdata;
 pub mod volume;
 pub mod xyz;
 
+pub use coords::MAX_COORDINATE;
 pub use error::GeometryError;
 pub use frame::{Aabb, Similarity};
 pub use load::load_mesh;
-pub use math::MAX_COORDINATE;
 pub use mesh::{TriMesh, UvLayer};
 pub use registry::{BuildContext, SourceBuilder, SourceRegistry};
 pub use source::{GeometrySource, SurfaceSamples};

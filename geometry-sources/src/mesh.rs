@@ -1,7 +1,9 @@
 //! The triangle mesh shared by every crate that reads, bakes, exports or measures meshes.
 
+use glam::Vec3;
+
+use crate::coords::coordinate_problem;
 use crate::frame::{Aabb, Similarity};
-use crate::math::{add, coordinate_problem, cross, norm, normalize, sub};
 
 /// A triangle mesh, optionally with texture coordinates.
 ///
@@ -44,15 +46,13 @@ impl TriMesh {
 
     /// Twice the area of triangle `f` times its unit normal (the unnormalised cross product).
     pub fn face_normal_scaled(&self, f: usize) -> [f32; 3] {
-        let [a, b, c] = self.corners(f);
-        let e1 = sub(b, a);
-        let e2 = sub(c, a);
-        cross(e1, e2)
+        let [a, b, c] = self.corners(f).map(Vec3::from);
+        (b - a).cross(c - a).to_array()
     }
 
     /// The area of triangle `f`.
     pub fn face_area(&self, f: usize) -> f32 {
-        0.5 * norm(self.face_normal_scaled(f))
+        0.5 * Vec3::from(self.face_normal_scaled(f)).length()
     }
 
     /// The bounding box of the referenced and unreferenced vertices, `None` for an empty mesh.
@@ -70,16 +70,16 @@ impl TriMesh {
     /// Area-weighted vertex normals (unit length; zero for vertices that only touch degenerate faces
     /// or whose incident normals cancel). Used for smooth-shaded sampling.
     pub fn vertex_normals(&self) -> Vec<[f32; 3]> {
-        let mut acc = vec![[0.0f32; 3]; self.positions.len()];
+        let mut acc = vec![Vec3::ZERO; self.positions.len()];
         for (f, t) in self.triangles.iter().enumerate() {
-            let n = self.face_normal_scaled(f);
+            let n = Vec3::from(self.face_normal_scaled(f));
             for &v in t {
                 if let Some(a) = acc.get_mut(v as usize) {
-                    *a = add(*a, n);
+                    *a += n;
                 }
             }
         }
-        acc.into_iter().map(|a| normalize(a).unwrap_or([0.0; 3])).collect()
+        acc.into_iter().map(|a| a.normalize_or_zero().to_array()).collect()
     }
 
     /// True when at least one face has positive (finite) area, i.e. the surface can be sampled.

@@ -9,8 +9,8 @@ use std::path::Path;
 use ply_rs_bw::parser::{Parser, Reader};
 use ply_rs_bw::ply::{Property, PropertyAccess, PropertyAccessResult};
 
+use crate::coords::V3;
 use crate::error::GeometryError;
-use crate::math::V3;
 
 /// Points read from a file; `normals`, when present, has one (not yet normalised) entry per point.
 #[derive(Clone, Debug, Default, PartialEq)]

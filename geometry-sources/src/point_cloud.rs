@@ -12,13 +12,14 @@
 
 use std::path::PathBuf;
 
+use glam::Vec3;
 use rand::Rng;
 use serde::Deserialize;
 
+use crate::coords::{V3, coordinate_problem};
 use crate::error::GeometryError;
 use crate::frame::{Aabb, Similarity};
 use crate::load::dotted;
-use crate::math::{V3, coordinate_problem, normalize};
 use crate::options::{options_error, parse_options};
 use crate::ply::{PointSet, read_ply};
 use crate::registry::BuildContext;
@@ -164,7 +165,7 @@ fn unit_file_normals(path: &std::path::Path, normals: Vec<V3>) -> Result<Vec<V3>
         .into_iter()
         .enumerate()
         .map(|(i, n)| {
-            normalize(n).ok_or_else(|| {
+            Vec3::from(n).try_normalize().map(V3::from).ok_or_else(|| {
                 GeometryError::invalid(
                     path,
                     format!("point {} has an unusable normal {n:?}; set normals = \"estimate\" to ignore the file's", i + 1),

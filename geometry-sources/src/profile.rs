@@ -15,12 +15,13 @@
 //!
 //! Deterministic: a pure function of the mesh and the seed, independent of the thread count.
 
+use glam::Vec3;
 use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::camera::random_unit_vector;
+use crate::coords::V3;
 use crate::frame::Aabb;
-use crate::math::{V3, dot, madd, norm, sub};
 use crate::mesh::TriMesh;
 use crate::raycast::RayCaster;
 use crate::sampling::uniform::{AreaSampler, sample_uniform};
@@ -161,7 +162,7 @@ fn visibility(mesh: &TriMesh, seed: u64) -> (f64, f64) {
                 match exit {
                     None => counts.0 += 1,
                     Some(d) => {
-                        counts.1 += usize::from(dot(d, n) > 0.0);
+                        counts.1 += usize::from(Vec3::from(d).dot(Vec3::from(n)) > 0.0);
                         counts.2 += 1;
                     }
                 }
@@ -175,15 +176,14 @@ fn visibility(mesh: &TriMesh, seed: u64) -> (f64, f64) {
 
 /// Whether the ray from `p` along the unit `dir` leaves the sphere `(center, radius)` unobstructed.
 fn escapes(caster: &RayCaster, p: V3, dir: V3, offset: f32, center: V3, radius: f32) -> bool {
-    let start = madd(p, offset, dir);
-    let reach = norm(sub(start, center)) + radius;
-    caster.intersect(start, dir, reach).is_none()
+    let start = Vec3::from(p) + offset * Vec3::from(dir);
+    let reach = start.distance(Vec3::from(center)) + radius;
+    caster.intersect(start.to_array(), dir, reach).is_none()
 }
 
 /// The bounding sphere of a box.
 fn sphere_of(b: &Aabb) -> (V3, f32) {
-    let center = std::array::from_fn(|k| 0.5 * (b.min[k] + b.max[k]));
-    (center, 0.5 * norm(sub(b.max, b.min)))
+    (b.center(), 0.5 * Vec3::from(b.max).distance(Vec3::from(b.min)))
 }
 
 #[cfg(test)]

@@ -9,7 +9,7 @@
 use parry3d::math::Vec3;
 use parry3d::query::{Ray, RayCast};
 
-use crate::math::V3;
+use crate::coords::V3;
 use crate::mesh::TriMesh;
 
 /// The nearest intersection of a ray with the mesh.
@@ -65,25 +65,25 @@ impl RayCaster {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::math::{cross, dot, sub};
     use rand::{Rng, SeedableRng};
 
     /// Brute-force nearest hit (two-sided Möller–Trumbore), for comparison.
     fn brute(mesh: &TriMesh, o: V3, d: V3) -> Option<(f32, u32)> {
+        let (o, d) = (Vec3::from(o), Vec3::from(d));
         let mut best: Option<(f32, u32)> = None;
         for f in 0..mesh.triangles.len() {
-            let [a, b, c] = mesh.corners(f);
-            let (e1, e2) = (sub(b, a), sub(c, a));
-            let p = cross(d, e2);
-            let det = dot(e1, p);
+            let [a, b, c] = mesh.corners(f).map(Vec3::from);
+            let (e1, e2) = (b - a, c - a);
+            let p = d.cross(e2);
+            let det = e1.dot(p);
             if det == 0.0 {
                 continue;
             }
-            let s = sub(o, a);
-            let u = dot(s, p) / det;
-            let q = cross(s, e1);
-            let v = dot(d, q) / det;
-            let t = dot(e2, q) / det;
+            let s = o - a;
+            let u = s.dot(p) / det;
+            let q = s.cross(e1);
+            let v = d.dot(q) / det;
+            let t = e2.dot(q) / det;
             if u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t >= 0.0 && best.is_none_or(|(bt, _)| t < bt) {
                 best = Some((t, f as u32));
             }

@@ -7,6 +7,7 @@
 
 use std::path::PathBuf;
 
+use glam::Vec3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -167,16 +168,16 @@ impl MeshDistance {
 /// Exact distance from `p` to the triangle `[a, b, c]` (closest-point construction from Ericson,
 /// *Real-Time Collision Detection*, 5.1.5).
 pub fn point_triangle_distance(p: [f32; 3], [a, b, c]: [[f32; 3]; 3]) -> f32 {
-    use crate::math::{dot, madd, norm, sub};
-    let (ab, ac, ap) = (sub(b, a), sub(c, a), sub(p, a));
-    let (d1, d2) = (dot(ab, ap), dot(ac, ap));
+    let [p, a, b, c] = [p, a, b, c].map(Vec3::from);
+    let (ab, ac, ap) = (b - a, c - a, p - a);
+    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
     let closest = if d1 <= 0.0 && d2 <= 0.0 {
         a
     } else {
-        let bp = sub(p, b);
-        let (d3, d4) = (dot(ab, bp), dot(ac, bp));
-        let cp = sub(p, c);
-        let (d5, d6) = (dot(ab, cp), dot(ac, cp));
+        let bp = p - b;
+        let (d3, d4) = (ab.dot(bp), ac.dot(bp));
+        let cp = p - c;
+        let (d5, d6) = (ab.dot(cp), ac.dot(cp));
         let vc = d1 * d4 - d3 * d2;
         let vb = d5 * d2 - d1 * d6;
         let va = d3 * d6 - d5 * d4;
@@ -185,15 +186,15 @@ pub fn point_triangle_distance(p: [f32; 3], [a, b, c]: [[f32; 3]; 3]) -> f32 {
         } else if d6 >= 0.0 && d5 <= d6 {
             c
         } else if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
-            madd(a, d1 / (d1 - d3), ab)
+            a + d1 / (d1 - d3) * ab
         } else if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
-            madd(a, d2 / (d2 - d6), ac)
+            a + d2 / (d2 - d6) * ac
         } else if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
-            madd(b, (d4 - d3) / ((d4 - d3) + (d5 - d6)), sub(c, b))
+            b + (d4 - d3) / ((d4 - d3) + (d5 - d6)) * (c - b)
         } else {
             let denom = 1.0 / (va + vb + vc);
-            madd(madd(a, vb * denom, ab), vc * denom, ac)
+            a + vb * denom * ab + vc * denom * ac
         }
     };
-    norm(sub(p, closest))
+    p.distance(closest)
 }

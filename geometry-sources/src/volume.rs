@@ -8,7 +8,7 @@
 use rand::Rng;
 
 use crate::camera::Ray;
-use crate::math::{V3, madd};
+use crate::coords::V3;
 
 /// Marching stops once the transmittance drops below this: the remaining weight along the ray is
 /// at most this much, and skipping it makes opaque rays cheap.
@@ -162,14 +162,14 @@ impl DensityGrid {
         let mut i = 0;
         while i < steps {
             let start = t0 + i as f32 * delta;
-            if let Some(exit) = self.empty_block_exit(madd(ray.origin, start, ray.dir), ray) {
+            if let Some(exit) = self.empty_block_exit(ray.at(start), ray) {
                 // Jump to the step whose interval holds the exit point; skipped samples had density 0.
                 i = (((exit - t0) / delta) as usize).max(i + 1);
                 continue;
             }
             let t = start + rng.random::<f32>() * delta;
             i += 1;
-            let sigma = self.density(madd(ray.origin, t, ray.dir));
+            let sigma = self.density(ray.at(t));
             if sigma > 0.0 {
                 let alpha = 1.0 - (-sigma * delta).exp();
                 let w = transmittance * alpha;

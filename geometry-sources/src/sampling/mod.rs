@@ -5,9 +5,10 @@
 pub mod uniform;
 pub mod visible;
 
+use glam::Vec3;
 use serde::Deserialize;
 
-use crate::math::{V3, dot, madd, normalize, scale, sub};
+use crate::coords::V3;
 use crate::mesh::TriMesh;
 
 /// Which normal a mesh sample carries.
@@ -35,7 +36,7 @@ impl SurfaceNormals {
     /// sampled (zero area, never hit).
     pub fn new(mesh: &TriMesh, mode: NormalMode) -> Self {
         let face = (0..mesh.triangles.len())
-            .map(|f| normalize(mesh.face_normal_scaled(f)).unwrap_or([0.0; 3]))
+            .map(|f| Vec3::from(mesh.face_normal_scaled(f)).normalize_or_zero().to_array())
             .collect();
         let vertex = if mode == NormalMode::Vertex { mesh.vertex_normals() } else { Vec::new() };
         SurfaceNormals { mode, face, vertex }
@@ -58,25 +59,25 @@ impl SurfaceNormals {
             return face;
         }
         let [i0, i1, i2] =
-            mesh.triangles[f].map(|v| self.vertex.get(v as usize).copied().unwrap_or([0.0; 3]));
-        let n = madd(madd(scale(i0, 1.0 - b1 - b2), b1, i1), b2, i2);
-        normalize(n).unwrap_or(face)
+            mesh.triangles[f].map(|v| Vec3::from(self.vertex.get(v as usize).copied().unwrap_or([0.0; 3])));
+        let n = i0 * (1.0 - b1 - b2) + b1 * i1 + b2 * i2;
+        n.try_normalize().map_or(face, V3::from)
     }
 }
 
 /// The point at barycentric `(b1, b2)` of face `f`.
 pub(crate) fn point_on(mesh: &TriMesh, f: usize, b1: f32, b2: f32) -> V3 {
-    let [a, b, c] = mesh.corners(f);
-    madd(madd(a, b1, sub(b, a)), b2, sub(c, a))
+    let [a, b, c] = mesh.corners(f).map(Vec3::from);
+    (a + b1 * (b - a) + b2 * (c - a)).to_array()
 }
 
 /// Barycentric coordinates `(b1, b2)` of the point of face `f`'s plane nearest to `p`, clamped to
 /// the triangle (the weights of corners 1 and 2). Face `f` must have positive area.
 pub(crate) fn barycentric(mesh: &TriMesh, f: usize, p: V3) -> (f32, f32) {
-    let [a, b, c] = mesh.corners(f);
-    let (e1, e2, d) = (sub(b, a), sub(c, a), sub(p, a));
-    let (d11, d12, d22) = (dot(e1, e1), dot(e1, e2), dot(e2, e2));
-    let (d1, d2) = (dot(d, e1), dot(d, e2));
+    let [a, b, c] = mesh.corners(f).map(Vec3::from);
+    let (e1, e2, d) = (b - a, c - a, Vec3::from(p) - a);
+    let (d11, d12, d22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+    let (d1, d2) = (d.dot(e1), d.dot(e2));
     let det = d11 * d22 - d12 * d12;
     if det.is_nan() || det <= 0.0 {
         return (1.0 / 3.0, 1.0 / 3.0);

@@ -2,12 +2,13 @@
 //! rays and keep the first hit of each. Geometry that no camera sees (interior bubbles, the inside
 //! of a closed shell, faces hidden behind others) is never sampled, which is the point.
 
+use glam::Vec3;
 use rand::Rng;
 use rayon::prelude::*;
 
 use super::{SurfaceNormals, barycentric};
 use crate::camera::{CameraRig, Ray};
-use crate::math::{V3, dot, madd, neg};
+use crate::coords::V3;
 use crate::mesh::TriMesh;
 use crate::raycast::RayCaster;
 use crate::seeding::{chunk_rng, par_generate};
@@ -95,8 +96,9 @@ impl VisibleSampler {
 fn first_hit(caster: &RayCaster, mesh: &TriMesh, normals: &SurfaceNormals, ray: &Ray) -> Option<(V3, V3)> {
     let hit = caster.intersect(ray.origin, ray.dir, f32::MAX)?;
     let f = hit.face as usize;
-    let p = madd(ray.origin, hit.t, ray.dir);
+    let p = ray.at(hit.t);
     let (b1, b2) = barycentric(mesh, f, p);
-    let n = normals.at(mesh, f, b1, b2);
-    Some((p, if dot(n, ray.dir) > 0.0 { neg(n) } else { n }))
+    let n = Vec3::from(normals.at(mesh, f, b1, b2));
+    let n = if n.dot(Vec3::from(ray.dir)) > 0.0 { -n } else { n };
+    Some((p, n.to_array()))
 }
