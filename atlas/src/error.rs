@@ -65,12 +65,12 @@ impl AtlasError {
     }
 }
 
-/// [`nuvo_geometry::fsio::write_atomic`] with the failure reported as [`AtlasError::Write`] naming
+/// [`nuvo_fsio::write_atomic`] with the failure reported as [`AtlasError::Write`] naming
 /// `path`.
 pub(crate) fn write_atomic(
     path: &std::path::Path,
     fill: impl FnOnce(&mut dyn std::io::Write) -> std::io::Result<()>,
 ) -> Result<(), AtlasError> {
-    nuvo_geometry::fsio::write_atomic(path, fill)
+    nuvo_fsio::write_atomic(path, fill)
         .map_err(|source| AtlasError::Write { path: path.to_path_buf(), source })
 }

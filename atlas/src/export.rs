@@ -14,7 +14,7 @@
 //! seam are split, others shared. Normals (optional) are area-weighted per *position*, so a seam
 //! does not crease the shading.
 //!
-//! All files are written atomically ([`nuvo_geometry::fsio::write_atomic`]).
+//! All files are written atomically ([`nuvo_fsio::write_atomic`]).
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
@@ -26,7 +26,6 @@ use nuvo_geometry::{Similarity, TriMesh, UvLayer};
 
 use crate::error::AtlasError;
 use crate::error::write_atomic;
-use crate::geom::vertex_normals;
 
 /// Name of the single material of exported meshes.
 pub const MATERIAL_NAME: &str = "nuvo_atlas";
@@ -114,7 +113,7 @@ pub fn glb_bytes(mesh: &TriMesh, frame: &Similarity, opts: &GlbOptions) -> Resul
         split.vertices.iter().map(|&(p, _)| frame.invert(mesh.positions[p as usize])).collect();
     let texcoords: Vec<[f32; 2]> = split.vertices.iter().map(|&(_, [u, v])| [u, 1.0 - v]).collect();
     let normals = opts.normals.then(|| {
-        let per_position = vertex_normals(&mesh.positions, &mesh.triangles);
+        let per_position = mesh.vertex_normals_or([0.0, 0.0, 1.0]);
         split.vertices.iter().map(|&(p, _)| per_position[p as usize]).collect::<Vec<_>>()
     });
 

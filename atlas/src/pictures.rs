@@ -17,7 +17,7 @@ use crate::camera::{Camera, MAX_IMAGE_SIDE, orbit_views};
 use crate::error::AtlasError;
 use crate::error::write_atomic;
 use crate::font::{GLYPH, draw_text};
-use crate::geom::{to_dvec3, vertex_normals};
+use crate::geom::to_dvec3;
 use crate::pack::AtlasLayout;
 use crate::raster::raster_parallel;
 use crate::render::render;
@@ -139,7 +139,7 @@ pub fn render_textured(
     if texture.width() == 0 || texture.height() == 0 {
         return Err(AtlasError::invalid("texture", "the texture image is empty"));
     }
-    let normals = vertex_normals(&mesh.positions, &mesh.triangles);
+    let normals = mesh.vertex_normals_or([0.0, 0.0, 1.0]);
     cameras
         .iter()
         .map(|cam| {

@@ -23,7 +23,6 @@ pub(crate) mod coords;
 pub mod density;
 pub mod error;
 pub mod frame;
-pub mod fsio;
 pub mod gltf_io;
 pub mod isosurface;
 pub mod load;

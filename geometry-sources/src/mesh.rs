@@ -1,6 +1,6 @@
 //! The triangle mesh shared by every crate that reads, bakes, exports or measures meshes.
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 
 use crate::coords::coordinate_problem;
 use crate::frame::{Aabb, Similarity};
@@ -67,19 +67,24 @@ impl TriMesh {
         }
     }
 
-    /// Area-weighted vertex normals (unit length; zero for vertices that only touch degenerate faces
-    /// or whose incident normals cancel). Used for smooth-shaded sampling.
-    pub fn vertex_normals(&self) -> Vec<[f32; 3]> {
-        let mut acc = vec![Vec3::ZERO; self.positions.len()];
-        for (f, t) in self.triangles.iter().enumerate() {
-            let n = Vec3::from(self.face_normal_scaled(f));
+    /// Area-weighted per-vertex normals (unit length), accumulated in `f64` so the tiny triangles
+    /// of a large `f32` mesh still count. A vertex whose incident normals cancel, or that no
+    /// triangle uses, gets `fallback`: zero where a caller has its own fallback (sampling takes the
+    /// face's normal), `+Z` where every normal must be valid (glTF, renders).
+    pub fn vertex_normals_or(&self, fallback: [f32; 3]) -> Vec<[f32; 3]> {
+        let mut acc = vec![DVec3::ZERO; self.positions.len()];
+        for t in &self.triangles {
+            if t.iter().any(|&v| v as usize >= self.positions.len()) {
+                continue; // an invalid mesh (`validate` names it); nothing to add up
+            }
+            let [a, b, c] = t.map(|v| Vec3::from(self.positions[v as usize]).as_dvec3());
+            let n = (b - a).cross(c - a);
             for &v in t {
-                if let Some(a) = acc.get_mut(v as usize) {
-                    *a += n;
-                }
+                acc[v as usize] += n;
             }
         }
-        acc.into_iter().map(|a| a.normalize_or_zero().to_array()).collect()
+        let fallback = Vec3::from(fallback).as_dvec3();
+        acc.into_iter().map(|n| n.normalize_or(fallback).as_vec3().to_array()).collect()
     }
 
     /// True when at least one face has positive (finite) area, i.e. the surface can be sampled.
@@ -136,6 +141,19 @@ impl TriMesh {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn vertex_normals_are_unit_and_unused_vertices_get_the_fallback() {
+        let m = TriMesh {
+            positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [5.0, 5.0, 5.0]],
+            triangles: vec![[0, 2, 1]],
+            uv: None,
+        };
+        let n = m.vertex_normals_or([0.0, 0.0, 1.0]);
+        assert_eq!(n[0], [0.0, 1.0, 0.0]);
+        assert_eq!(n[3], [0.0, 0.0, 1.0]);
+        assert_eq!(m.vertex_normals_or([0.0; 3])[3], [0.0; 3]);
+    }
 
     fn unit_right_triangle() -> TriMesh {
         TriMesh {

@@ -9,8 +9,8 @@ use anyhow::Context;
 use nuvo_core::ablation::{self, Row, Variant, VariantError};
 use nuvo_core::config;
 use nuvo_core::run::{files, logged_seconds};
+use nuvo_fsio::write_bytes_atomic;
 use nuvo_geometry::SourceRegistry;
-use nuvo_geometry::fsio::write_bytes_atomic;
 use nuvo_losses::LossRegistry;
 
 use crate::train::Progress;

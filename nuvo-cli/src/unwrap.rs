@@ -236,7 +236,7 @@ pub fn run_unwrap(args: &UnwrapArgs) -> anyhow::Result<()> {
         let map = nuvo_atlas::gltf_scene::write_gltf_with_uvs(&input, uv, &scene)?;
         let map_path = out.join("scene_vertex_map.json");
         let json = serde_json::to_string(&map).context("cannot encode the scene's vertex map")?;
-        nuvo_geometry::fsio::write_bytes_atomic(&map_path, json.as_bytes())
+        nuvo_fsio::write_bytes_atomic(&map_path, json.as_bytes())
             .with_context(|| format!("cannot write {}", map_path.display()))?;
         println!("wrote {} (the input's scene with TEXCOORD_0) and {}", scene.display(), map_path.display());
     }
@@ -258,7 +258,7 @@ pub fn run_unwrap(args: &UnwrapArgs) -> anyhow::Result<()> {
     })
     .context("cannot encode unwrap.json")?;
     let path = out.join("unwrap.json");
-    nuvo_geometry::fsio::write_bytes_atomic(&path, json.as_bytes())
+    nuvo_fsio::write_bytes_atomic(&path, json.as_bytes())
         .with_context(|| format!("cannot write {}", path.display()))?;
     println!(
         "done in {:.1} s (planning {:.1} s, training {:.1} s, bake and metrics {:.1} s); {} reproduces it with \

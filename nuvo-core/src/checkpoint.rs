@@ -14,7 +14,7 @@ use nuvo_autodiff::Tensor;
 use nuvo_geometry::Similarity;
 use safetensors::tensor::{Dtype, SafeTensors, TensorView};
 
-use nuvo_geometry::fsio::write_bytes_atomic as write_atomic;
+use nuvo_fsio::write_bytes_atomic as write_atomic;
 
 /// Identifies our files among other safetensors files.
 pub const FORMAT: &str = "nuvo-checkpoint";

@@ -349,7 +349,7 @@ fn bake_and_measure(
     })
     .map_err(|e| io_err(&path(names::VERTEX_MAP))(std::io::Error::other(e)))?;
     drop(export);
-    nuvo_geometry::fsio::write_bytes_atomic(&path(names::VERTEX_MAP), map.as_bytes())
+    nuvo_fsio::write_bytes_atomic(&path(names::VERTEX_MAP), map.as_bytes())
         .map_err(io_err(&path(names::VERTEX_MAP)))?;
     files.push(path(names::VERTEX_MAP));
     phases.done("export");
@@ -373,7 +373,7 @@ fn bake_and_measure(
     };
     let json = serde_json::to_string_pretty(&summary)
         .map_err(|e| io_err(&path(names::METRICS))(std::io::Error::other(e)))?;
-    nuvo_geometry::fsio::write_bytes_atomic(&path(names::METRICS), json.as_bytes())
+    nuvo_fsio::write_bytes_atomic(&path(names::METRICS), json.as_bytes())
         .map_err(io_err(&path(names::METRICS)))?;
     files.push(path(names::METRICS));
     phases.done("metrics");
@@ -479,7 +479,7 @@ fn write_point_uvs(
         csv.push_str(&format!("{},{},{},{chart},{},{}\n", q[0], q[1], q[2], uv[0], uv[1]));
     }
     let path = dir.join(names::POINTS);
-    nuvo_geometry::fsio::write_bytes_atomic(&path, csv.as_bytes()).map_err(io_err(&path))?;
+    nuvo_fsio::write_bytes_atomic(&path, csv.as_bytes()).map_err(io_err(&path))?;
     phases.done("points");
     Ok(OutputReport { files: vec![path], phase_seconds: phases.seconds, baked_uv: None, metrics: None })
 }

@@ -20,7 +20,7 @@ use std::time::Instant;
 
 use crate::checkpoint::Checkpoint;
 use crate::trainer::{StepOutcome, TrainError, Trainer};
-use nuvo_geometry::fsio::write_bytes_atomic as write_atomic;
+use nuvo_fsio::write_bytes_atomic as write_atomic;
 
 /// Fixed file names inside an output folder.
 pub mod files {

@@ -26,7 +26,8 @@ fn workspace_dependencies() -> BTreeMap<String, BTreeSet<String>> {
         .iter()
         .map(|m| {
             let deps = m.get("dependencies").and_then(toml::Value::as_table);
-            let ours = deps.into_iter().flat_map(|d| d.keys()).filter(|k| names.contains(*k)).cloned().collect();
+            let ours =
+                deps.into_iter().flat_map(|d| d.keys()).filter(|k| names.contains(*k)).cloned().collect();
             (m["package"]["name"].as_str().unwrap().to_owned(), ours)
         })
         .collect()
@@ -35,7 +36,8 @@ fn workspace_dependencies() -> BTreeMap<String, BTreeSet<String>> {
 /// The list between the `dependencies` markers, in its order: `` - `crate`: `dep`, `dep` `` (or `—`).
 fn documented_dependencies() -> Vec<(String, BTreeSet<String>)> {
     let text = std::fs::read_to_string(root().join("ARCHITECTURE.md")).unwrap();
-    let begin = text.find("<!-- dependencies: begin -->").expect("ARCHITECTURE.md has the list's begin marker");
+    let begin =
+        text.find("<!-- dependencies: begin -->").expect("ARCHITECTURE.md has the list's begin marker");
     let end = text.find("<!-- dependencies: end -->").expect("ARCHITECTURE.md has the list's end marker");
     let unquote = |s: &str| s.trim().trim_matches('`').to_owned();
     text[begin..end]
@@ -58,7 +60,10 @@ fn the_documented_dependencies_are_the_manifests_and_a_layering() {
     assert_eq!(listed.len(), documented.len(), "a crate is listed twice in ARCHITECTURE.md");
     for (name, deps) in &actual {
         let doc = listed.get(name).unwrap_or_else(|| panic!("ARCHITECTURE.md does not list `{name}`"));
-        assert_eq!(doc, deps, "`{name}`'s project dependencies: ARCHITECTURE.md says {doc:?}, Cargo.toml {deps:?}");
+        assert_eq!(
+            doc, deps,
+            "`{name}`'s project dependencies: ARCHITECTURE.md says {doc:?}, Cargo.toml {deps:?}"
+        );
     }
     for name in listed.keys() {
         assert!(actual.contains_key(name), "ARCHITECTURE.md lists `{name}`, which is not a workspace member");
@@ -66,7 +71,10 @@ fn the_documented_dependencies_are_the_manifests_and_a_layering() {
     let mut seen = BTreeSet::new();
     for (name, deps) in &documented {
         for d in deps {
-            assert!(seen.contains(d), "`{name}` depends on `{d}`, listed after it: the layering runs back up");
+            assert!(
+                seen.contains(d),
+                "`{name}` depends on `{d}`, listed after it: the layering runs back up"
+            );
         }
         seen.insert(name.clone());
     }

@@ -38,7 +38,7 @@ impl SurfaceNormals {
         let face = (0..mesh.triangles.len())
             .map(|f| Vec3::from(mesh.face_normal_scaled(f)).normalize_or_zero().to_array())
             .collect();
-        let vertex = if mode == NormalMode::Vertex { mesh.vertex_normals() } else { Vec::new() };
+        let vertex = if mode == NormalMode::Vertex { mesh.vertex_normals_or([0.0; 3]) } else { Vec::new() };
         SurfaceNormals { mode, face, vertex }
     }
 
