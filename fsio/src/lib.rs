@@ -1,4 +1,5 @@
-//! Atomic file writes, for every file the project writes (checkpoints, logs, meshes, images): the
+//! Atomic file writes, for every file the project writes (checkpoints, configs, meshes, images,
+//! metrics; `log.jsonl` alone is appended line by line): the
 //! bytes go to a temporary file in the destination folder, are flushed to disk, then the file is
 //! renamed over the destination. A crash, kill or error mid-write leaves either the old file or none,
 //! never a truncated file that looks complete.

@@ -7,7 +7,8 @@
 //! A per-chart quantity of the 3-D samples is asked for with a [`ChartRows`]: chart `i` on a set of
 //! [`Samples`]. The same handle gives the probabilities `c(x)[i]` on those rows
 //! ([`StepContext::chart_weights`]) and pairs each term with them in [`crate::chart_weighted_mean`],
-//! so a term and its weights cannot cover different rows. [`Samples::Support`] serves the losses
+//! which checks that every term has as many rows as its handle names (a term of the support
+//! labelled as every sample fails there as soon as anything is pruned). [`Samples::Support`] serves the losses
 //! whose per-chart terms are weighted by `c(x)[i]`: chart `i` is evaluated only on its *support*,
 //! the samples where `c(x)[i] ≥ τ` (`training.chart_support`). Once the charts have settled, most
 //! samples belong to one or two of them, so this skips most of the per-chart passes over the 3-D
@@ -422,13 +423,7 @@ impl<'a> StepContext<'a> {
     pub fn chart_weights(&mut self, r: ChartRows) -> Var {
         let c = self.chart_probs();
         let column = self.tape.slice_cols(c, r.chart, 1);
-        match r.samples {
-            Samples::Distortion | Samples::DistortionSupport if self.support(r.chart).is_none() => {
-                let k = self.batch_distortion();
-                self.tape.slice_rows(column, 0, k)
-            }
-            _ => self.select(r, column),
-        }
+        self.select(r, column)
     }
 
     /// Whether any chart is evaluated on fewer than every sample this step.

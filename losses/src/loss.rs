@@ -37,7 +37,8 @@ pub trait Loss: Send + Sync {
 ///
 /// # Panics
 /// Unless `per_chart` holds charts `0..n` in order, all on the same kind of samples, each term with
-/// as many rows as its samples (programming errors a loss's tests catch).
+/// as many rows as its handle names (programming errors a loss's tests catch: the row counts differ
+/// as soon as a support is pruned).
 pub fn chart_weighted_mean(ctx: &mut StepContext<'_>, per_chart: &[(ChartRows, Var)]) -> Var {
     let samples = per_chart.first().map(|(r, _)| r.samples).expect("a Nuvo atlas has at least one chart");
     for (i, &(r, d)) in per_chart.iter().enumerate() {
@@ -170,10 +171,14 @@ mod tests {
         crossing_charts().with_chart_support(0.5).evaluate(&Mismatched);
     }
 
-    /// Checks every per-chart getter's row count against [`StepContext::row_count`].
-    struct RowCounts;
+    /// Checks every per-chart getter's row count against [`StepContext::row_count`], on a step
+    /// whose supports are pruned or not.
+    struct RowCounts {
+        pruned: bool,
+    }
     impl crate::Loss for RowCounts {
         fn evaluate(&self, ctx: &mut StepContext<'_>) -> Result<Var, LossError> {
+            assert_eq!(ctx.is_pruned(), self.pruned);
             let x = ctx.x();
             for i in 0..ctx.charts() {
                 for samples in
@@ -201,7 +206,7 @@ mod tests {
         // Two samples, the first one alone a distortion sample; the support keeps one sample per
         // chart (chart 0 the second, chart 1 the first) plus chart 0's most probable distortion one.
         let scene = crossing_charts().with_chart_support(0.5).with_distortion_samples(1);
-        scene.evaluate(&RowCounts);
-        crossing_charts().evaluate(&RowCounts);
+        scene.evaluate(&RowCounts { pruned: true });
+        crossing_charts().evaluate(&RowCounts { pruned: false });
     }
 }

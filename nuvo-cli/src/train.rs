@@ -142,7 +142,13 @@ fn build_trainer(loaded: &LoadedConfig) -> anyhow::Result<Trainer> {
         trainer.params().numel(),
         trainer.model().grid_resolution()
     );
-    let terms: Vec<String> = trainer.terms().iter().map(|t| format!("{}×{}", t.name, t.weight)).collect();
+    // The warm-start prior, a term too, has its own line below.
+    let terms: Vec<String> = trainer
+        .terms()
+        .iter()
+        .filter(|t| t.name != nuvo_core::trainer::WARM_START_TERM)
+        .map(|t| format!("{}×{}", t.name, t.weight))
+        .collect();
     println!("losses: {}", terms.join(", "));
     let tau = trainer.config().training.chart_support;
     if tau > 0.0 {

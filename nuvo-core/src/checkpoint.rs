@@ -44,8 +44,11 @@ pub struct Checkpoint {
 /// Adam's state: its step count and its first and second moments, one vector per parameter.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AdamState {
+    /// Steps Adam has taken (its bias correction).
     pub steps: u64,
+    /// First moments, one vector per parameter.
     pub m: Vec<Vec<f32>>,
+    /// Second moments, one vector per parameter.
     pub v: Vec<Vec<f32>>,
 }
 

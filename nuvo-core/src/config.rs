@@ -41,7 +41,8 @@ pub struct ExperimentConfig {
     /// the paper). See [`crate::warm_start`].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub warm_start: Option<crate::warm_start::WarmStartConfig>,
-    /// The loss terms, one table each. Absent: every built-in loss at its paper weight. Present:
+    /// The loss terms, one table each. Absent: the paper's eight at their weights
+    /// (`nuvo_losses::builtin::PAPER`), whatever else is registered. Present:
     /// exactly the listed terms (removing an entry, or a weight of 0, is an ablation).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub losses: Option<BTreeMap<String, LossConfig>>,

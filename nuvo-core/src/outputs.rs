@@ -268,7 +268,7 @@ pub fn write_outputs(
         return bake_and_measure(atlas, &m, Some(input), dir, opts);
     }
     let scene = scene.ok_or(OutputError::NoGeometry)?;
-    if scene.to_canonical() != atlas.frame() {
+    if !same_frame(&scene.to_canonical(), &atlas.frame()) {
         return Err(OutputError::OtherGeometry {
             geometry: scene.describe(),
             found: scene.to_canonical(),
@@ -282,6 +282,17 @@ pub fn write_outputs(
         }
         None => write_point_uvs(atlas, scene, dir, opts),
     }
+}
+
+/// Whether two input → canonical maps place the geometry alike: centres within 1e-5 of the
+/// canonical extent and scales within 1e-5 relative. Exact equality would make a run unbakeable
+/// after a last-bit change in how a reader computes bounding boxes; any real change of the geometry
+/// moves them far more.
+fn same_frame(a: &Similarity, b: &Similarity) -> bool {
+    const TOLERANCE: f32 = 1e-5;
+    let close_scale = (a.scale - b.scale).abs() <= TOLERANCE * a.scale.max(b.scale);
+    let close_center = a.center.iter().zip(&b.center).all(|(x, y)| (x - y).abs() * a.scale <= TOLERANCE);
+    close_scale && close_center
 }
 
 fn bake_and_measure(
@@ -482,4 +493,18 @@ fn write_point_uvs(
     nuvo_fsio::write_bytes_atomic(&path, csv.as_bytes()).map_err(io_err(&path))?;
     phases.done("points");
     Ok(OutputReport { files: vec![path], phase_seconds: phases.seconds, baked_uv: None, metrics: None })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frames_match_within_rounding_not_beyond() {
+        let a = Similarity { center: [1.0, -2.0, 0.5], scale: 4.0 };
+        let nudged = Similarity { center: [1.0 + 1e-7, -2.0, 0.5], scale: 4.0 * (1.0 + 1e-7) };
+        assert!(same_frame(&a, &a) && same_frame(&a, &nudged));
+        assert!(!same_frame(&a, &Similarity { center: [1.001, -2.0, 0.5], scale: 4.0 }));
+        assert!(!same_frame(&a, &Similarity { scale: 4.01, ..a }));
+    }
 }

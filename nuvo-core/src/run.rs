@@ -221,11 +221,12 @@ fn open_log(path: &Path, from_step: u64) -> Result<(std::io::BufWriter<std::fs::
         let f = std::fs::File::create(path).map_err(io_err(path))?;
         return Ok((std::io::BufWriter::new(f), 0.0));
     }
-    // A log lost since the checkpoint starts afresh; one that cannot be read is an error, not
-    // silently dropped.
-    let old = match std::fs::read_to_string(path) {
+    // A log lost since the checkpoint starts afresh, and lines that are not JSON are dropped
+    // below; a log that cannot be read is an error, not silently emptied.
+    let old = match std::fs::read(path) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => String::new(),
-        read => read.map_err(io_err(path))?,
+        Err(source) => return Err(TrainError::Read { path: path.to_owned(), source }),
+        Ok(bytes) => String::from_utf8_lossy(&bytes).into_owned(),
     };
     let kept: String = old
         .lines()

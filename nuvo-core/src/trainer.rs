@@ -47,6 +47,12 @@ pub enum TrainError {
         #[source]
         source: std::io::Error,
     },
+    #[error("cannot read {path}: {source}")]
+    Read {
+        path: std::path::PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
     #[error("{0}")]
     Resume(String),
     #[error(transparent)]
@@ -59,23 +65,24 @@ pub enum TrainError {
 pub struct Term {
     /// The `[losses.NAME]` key ([`WARM_START_TERM`] for the prior).
     pub name: String,
-    /// Its weight (> 0; zero-weight terms are not built).
+    /// Its weight (> 0 for `[losses]` terms, whose zero weight leaves them out; the prior is built
+    /// with whatever `warm_start.weight` says).
     pub weight: f32,
     /// How the weight changes over the run.
     pub schedule: WeightSchedule,
-    /// Whether the term reads every chart on every sample. While such a term weighs in, chart
-    /// support (`training.chart_support`) is off: the charts' passes over every sample are recorded
-    /// anyway, so pruning the other terms to the charts' supports would only add passes (and the
-    /// projection prior's chart probabilities are still soft).
-    pub reads_every_chart: bool,
+    /// Whether chart support (`training.chart_support`) waits while this term weighs in: true for
+    /// the warm-start prior, which reads every chart on every sample (so pruning the other terms to
+    /// the charts' supports would only add passes) while its chart probabilities are still soft.
+    pub suspends_chart_support: bool,
     loss: Box<dyn Loss>,
 }
 
 /// How a term's weight `w` changes over the run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum WeightSchedule {
-    /// `w · min(1, (step + 1) / steps)`: up from `w / steps` to `w` (`[losses.NAME] warmup_steps`;
-    /// 0 is a constant weight).
+    /// `w` throughout.
+    Constant,
+    /// `w · min(1, (step + 1) / steps)`: up from `w / steps` to `w` (`[losses.NAME] warmup_steps`).
     RampUp { steps: u64 },
     /// `w · (1 − step / steps)`, 0 from `steps` on: down to nothing, after which the term has
     /// ended and is not recorded (the `[warm_start]` prior).
@@ -89,7 +96,7 @@ impl Term {
             WeightSchedule::RampUp { steps } if step < steps => {
                 self.weight * (step + 1) as f32 / steps as f32
             }
-            WeightSchedule::RampUp { .. } => self.weight,
+            WeightSchedule::Constant | WeightSchedule::RampUp { .. } => self.weight,
             WeightSchedule::FadeOut { steps } if step < steps => {
                 self.weight * (1.0 - step as f32 / steps as f32)
             }
@@ -358,9 +365,9 @@ impl Trainer {
     }
 
     /// `training.chart_support` at `step`: 0 while a term that reads every chart everywhere
-    /// weighs in (see [`Term::reads_every_chart`]).
+    /// weighs in (see [`Term::suspends_chart_support`]).
     fn chart_support_at(&self, step: u64) -> f32 {
-        if self.terms.iter().any(|t| t.reads_every_chart && t.weight_at(step) > 0.0) {
+        if self.terms.iter().any(|t| t.suspends_chart_support && t.weight_at(step) > 0.0) {
             0.0
         } else {
             self.config.training.chart_support
@@ -487,7 +494,7 @@ fn warm_start_term(
         name: WARM_START_TERM.to_owned(),
         weight: cfg.weight,
         schedule: WeightSchedule::FadeOut { steps: cfg.steps },
-        reads_every_chart: true,
+        suspends_chart_support: true,
         loss: Box::new(prior),
     }))
 }
@@ -555,8 +562,11 @@ fn build_terms(
         };
         let weight = weight.unwrap_or(default_weight);
         if weight > 0.0 {
-            let schedule = WeightSchedule::RampUp { steps: warmup_steps.unwrap_or(0) };
-            terms.push(Term { name, weight, schedule, reads_every_chart: false, loss });
+            let schedule = match warmup_steps.unwrap_or(0) {
+                0 => WeightSchedule::Constant,
+                steps => WeightSchedule::RampUp { steps },
+            };
+            terms.push(Term { name, weight, schedule, suspends_chart_support: false, loss });
         }
     }
     Ok(terms)
@@ -574,7 +584,7 @@ mod tests {
     }
 
     fn term(weight: f32, schedule: WeightSchedule) -> Term {
-        Term { name: "t".into(), weight, schedule, reads_every_chart: false, loss: Box::new(Zero) }
+        Term { name: "t".into(), weight, schedule, suspends_chart_support: false, loss: Box::new(Zero) }
     }
 
     #[test]
@@ -584,7 +594,7 @@ mod tests {
             weights(&term(10.0, WeightSchedule::RampUp { steps: 4 })),
             [2.5, 5.0, 7.5, 10.0, 10.0, 10.0]
         );
-        assert_eq!(weights(&term(10.0, WeightSchedule::RampUp { steps: 0 })), [10.0; 6]);
+        assert_eq!(weights(&term(10.0, WeightSchedule::Constant)), [10.0; 6]);
         let prior = term(8.0, WeightSchedule::FadeOut { steps: 4 });
         assert_eq!(weights(&prior), [8.0, 6.0, 4.0, 2.0, 0.0, 0.0]);
         assert_eq!(
@@ -592,5 +602,6 @@ mod tests {
             [true, true, true, true, false, false]
         );
         assert!(!term(1.0, WeightSchedule::RampUp { steps: 4 }).is_fading(0));
+        assert!(!term(1.0, WeightSchedule::Constant).is_fading(0));
     }
 }

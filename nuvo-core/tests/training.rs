@@ -46,7 +46,7 @@ fn param_values(t: &Trainer) -> Vec<f32> {
 fn training_lowers_the_loss_and_writes_the_run_folder() {
     let cfg = small("");
     let mut t = trainer(&cfg);
-    assert_eq!(t.terms().len(), 8, "all built-in losses by default");
+    assert_eq!(t.terms().len(), 8, "the paper's eight losses by default");
     let first = t.step().unwrap();
     assert!(first.skipped.is_none() && first.total.is_finite());
     let dir = tempfile::tempdir().unwrap();
@@ -181,35 +181,35 @@ impl Loss for NanOnCalls {
     }
 }
 
-/// The calls on which the next [`NanOnCalls`] built returns NaN.
-static NAN_FROM: AtomicU64 = AtomicU64::new(0);
-static NAN_TO: AtomicU64 = AtomicU64::new(0);
-
+/// `[losses.nan_probe] from = F, to = T` (`T` absent: never finite again).
 impl RegisteredLoss for NanOnCalls {
     const INFO: LossInfo = LossInfo { name: "nan_probe", summary: "test", default_weight: 1.0, options: &[] };
-    fn from_options(_: &toml::Table) -> Result<Self, LossError> {
+    fn from_options(options: &toml::Table) -> Result<Self, LossError> {
+        let at = |key: &str| options.get(key).and_then(toml::Value::as_integer).map(|v| v as u64);
         Ok(NanOnCalls {
             calls: AtomicU64::new(0),
-            from: NAN_FROM.load(Ordering::SeqCst),
-            to: NAN_TO.load(Ordering::SeqCst),
+            from: at("from").unwrap_or(0),
+            to: at("to").unwrap_or(u64::MAX),
         })
     }
 }
 
-fn registry_with_nan(from: u64, to: u64) -> LossRegistry {
+fn registry_with_nan() -> LossRegistry {
     let mut r = LossRegistry::with_builtins();
-    NAN_FROM.store(from, Ordering::SeqCst);
-    NAN_TO.store(to, Ordering::SeqCst);
     r.add::<NanOnCalls>();
     r
 }
 
-const WITH_PROBE: &str = "[losses.cycle_3d]\n[losses.surface]\n[losses.nan_probe]\n";
+/// A config with the probe NaN on calls `from..to`.
+fn with_probe(from: u64, to: Option<u64>) -> LoadedConfig {
+    let to = to.map(|t| format!("to = {t}\n")).unwrap_or_default();
+    small(&format!("[losses.cycle_3d]\n[losses.surface]\n[losses.nan_probe]\nfrom = {from}\n{to}"))
+}
 
 #[test]
 fn a_nan_term_skips_the_step_names_the_term_and_leaves_parameters_untouched() {
-    let cfg = small(WITH_PROBE);
-    let mut t = Trainer::new(&cfg, &sources(), &registry_with_nan(3, 5)).unwrap();
+    let cfg = with_probe(3, Some(5));
+    let mut t = Trainer::new(&cfg, &sources(), &registry_with_nan()).unwrap();
     for _ in 0..3 {
         assert!(t.step().unwrap().skipped.is_none());
     }
@@ -224,10 +224,10 @@ fn a_nan_term_skips_the_step_names_the_term_and_leaves_parameters_untouched() {
 
 #[test]
 fn persistent_nans_roll_back_then_give_up_with_a_clear_error() {
-    let mut cfg = small(WITH_PROBE);
+    let mut cfg = with_probe(8, None);
     cfg.config.training.max_bad_steps = 2;
     cfg.config.training.checkpoint_every = 5;
-    let mut t = Trainer::new(&cfg, &sources(), &registry_with_nan(8, u64::MAX)).unwrap();
+    let mut t = Trainer::new(&cfg, &sources(), &registry_with_nan()).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let e =
         run(&mut t, &RunOptions { out_dir: dir.path().to_owned(), resume: false }, &mut Silent).unwrap_err();
@@ -240,12 +240,12 @@ fn persistent_nans_roll_back_then_give_up_with_a_clear_error() {
 
 #[test]
 fn a_transient_nan_burst_is_survived_by_rolling_back() {
-    let mut cfg = small(WITH_PROBE);
+    let mut cfg = with_probe(12, Some(15));
     cfg.config.training.max_bad_steps = 2;
     cfg.config.training.checkpoint_every = 5;
     // Calls 12..15 are NaN: three bad steps in a row trigger one rollback to step 10, after which the
     // replayed steps are finite again.
-    let mut t = Trainer::new(&cfg, &sources(), &registry_with_nan(12, 15)).unwrap();
+    let mut t = Trainer::new(&cfg, &sources(), &registry_with_nan()).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let s = run(&mut t, &RunOptions { out_dir: dir.path().to_owned(), resume: false }, &mut Silent).unwrap();
     assert_eq!(s.rollbacks, 1);
@@ -565,8 +565,7 @@ fn a_resumed_run_settles_where_an_uninterrupted_one_does() {
 
 #[test]
 fn a_config_without_losses_trains_the_papers_eight_and_no_loss_registered_later() {
-    let mut registry = LossRegistry::with_builtins();
-    registry.add::<NanOnCalls>();
+    let registry = registry_with_nan();
     let t = Trainer::new(&small(""), &sources(), &registry).unwrap();
     let names: Vec<&str> = t.terms().iter().map(|t| t.name.as_str()).collect();
     assert_eq!(names, nuvo_losses::builtin::PAPER);
@@ -581,13 +580,16 @@ fn an_atlas_from_a_checkpoint_evaluates_like_the_trainer_it_came_from() {
     for _ in 0..3 {
         t.step().unwrap();
     }
-    let ckpt = t.checkpoint().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join(files::CHECKPOINT);
+    t.checkpoint().unwrap().save(&path).unwrap();
+    let ckpt = Checkpoint::load(&path).unwrap();
     let pts = [[0.0, 0.0, 1.0], [0.6, 0.0, -0.8], [0.0, -1.0, 0.0]];
     let mut atlas = nuvo_core::TrainedAtlas::from_checkpoint(&ckpt, t.config()).unwrap();
     assert_eq!(atlas.evaluate_atlas(&pts), t.atlas().evaluate_atlas(&pts));
-    assert_eq!((atlas.steps(), atlas.frame(), atlas.charts()), (3, ckpt.to_canonical, 2));
+    assert_eq!((atlas.steps(), atlas.frame(), atlas.charts()), (3, t.source().to_canonical(), 2));
     let mut narrower = t.config().clone();
     narrower.model.width = 16;
     let e = nuvo_core::TrainedAtlas::from_checkpoint(&ckpt, &narrower).err().unwrap().to_string();
-    assert!(e.contains("does not fit this model") && e.contains("chart.l0.w"), "{e}");
+    assert!(e.contains("does not fit this model") && e.contains("`chart.l0.b` is 1×32 in the checkpoint, 1×16"), "{e}");
 }

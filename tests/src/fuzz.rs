@@ -76,18 +76,21 @@ impl Target {
         }
     }
 
-    /// Feeds `bytes` to the reader (through a file in `scratch` where the reader takes paths). Any
-    /// `Ok` or `Err` is fine; only a panic escapes as `Err(message)`.
-    pub fn check(self, bytes: &[u8], scratch: &Path) -> Result<(), String> {
+    /// Feeds `bytes` to the reader (through a file in `scratch` where the reader takes paths):
+    /// `Ok(true)` when it accepted them, `Ok(false)` when it returned an error; only a panic escapes,
+    /// as `Err(message)`.
+    pub fn check(self, bytes: &[u8], scratch: &Path) -> Result<bool, String> {
         let path = scratch.join(format!("input.{}", self.name()));
         if self != Target::Npy && self != Target::Config {
             std::fs::write(&path, bytes).map_err(|e| format!("cannot write the scratch file: {e}"))?;
         }
         let outcome = catch_unwind(AssertUnwindSafe(|| match self {
-            Target::Npy => drop(nuvo_geometry::npy::parse_npy(bytes)),
-            Target::Obj | Target::Glb | Target::Gltf => drop(nuvo_geometry::load_mesh(&path)),
-            Target::Ply | Target::Xyz => drop(nuvo_geometry::point_cloud::read_points(&path)),
-            Target::Config => drop(nuvo_core::config::from_str("fuzz.toml", &String::from_utf8_lossy(bytes))),
+            Target::Npy => nuvo_geometry::npy::parse_npy(bytes).is_ok(),
+            Target::Obj | Target::Glb | Target::Gltf => nuvo_geometry::load_mesh(&path).is_ok(),
+            Target::Ply | Target::Xyz => nuvo_geometry::point_cloud::read_points(&path).is_ok(),
+            Target::Config => {
+                nuvo_core::config::from_str("fuzz.toml", &String::from_utf8_lossy(bytes)).is_ok()
+            }
         }));
         outcome.map_err(|payload| {
             payload
