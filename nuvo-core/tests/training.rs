@@ -591,5 +591,8 @@ fn an_atlas_from_a_checkpoint_evaluates_like_the_trainer_it_came_from() {
     let mut narrower = t.config().clone();
     narrower.model.width = 16;
     let e = nuvo_core::TrainedAtlas::from_checkpoint(&ckpt, &narrower).err().unwrap().to_string();
-    assert!(e.contains("does not fit this model") && e.contains("`chart.l0.b` is 1×32 in the checkpoint, 1×16"), "{e}");
+    assert!(
+        e.contains("does not fit this model") && e.contains("`chart.l0.b` is 1×32 in the checkpoint, 1×16"),
+        "{e}"
+    );
 }
