@@ -144,6 +144,7 @@ pub fn join_small_islands(mesh: &TriMesh, opts: &JoinOptions) -> Result<Joined, 
         area3,
         coords: uv.coords.iter().map(|p| p.map(f64::from)).collect(),
         tris: uv.triangles.clone(),
+        sums: vec![None; islands.len()],
         members: islands,
         label,
     };
@@ -235,6 +236,25 @@ struct Work<'a> {
     tris: Vec<[u32; 3]>,
     members: Vec<Vec<u32>>,
     label: Vec<u32>,
+    /// Per island, what every try against it reads of it, until the island changes.
+    sums: Vec<Option<NeighbourSums>>,
+}
+
+/// What [`Work::try_join`] reads of the neighbour island, kept between tries: thousands of small
+/// islands of a fragmented mesh try the same few large neighbours, and each pass over a neighbour
+/// of tens of thousands of faces was most of the join's time. Computed in the members' order by the
+/// same expressions as a fresh pass, and dropped whenever the island's faces change, so the values
+/// are exactly those a fresh pass gives.
+#[derive(Clone, Copy, Debug)]
+struct NeighbourSums {
+    /// Twice the signed UV area.
+    signed: f64,
+    /// Twice the unsigned UV area.
+    unsigned: f64,
+    /// The 3-D area.
+    area3: f64,
+    /// Its PartUV area distortion alone, once a try got that far.
+    distortion: Option<f64>,
 }
 
 /// A joined island's corners: per face of it, per corner, an existing coordinate or a new one
@@ -276,21 +296,19 @@ impl Work<'_> {
     /// The faces `faces` grown onto island `nb` and checked (module docs), `None` when they cannot
     /// join it.
     fn try_join(
-        &self,
+        &mut self,
         faces: &[u32],
         nb: u32,
         edge_faces: &HashMap<(u32, u32), Vec<(u32, usize)>>,
         growth: Growth,
         seeds: Seeds,
     ) -> Option<Placed> {
+        let NeighbourSums { signed, unsigned, area3: nb_area3, distortion: alone } = self.neighbour_sums(nb);
         let nb_faces = &self.members[nb as usize];
-        let signed: f64 = nb_faces.iter().map(|&g| self.uv_area2(self.tris[g as usize])).sum();
-        let unsigned: f64 = nb_faces.iter().map(|&g| self.uv_area2(self.tris[g as usize]).abs()).sum();
         if signed == 0.0 || unsigned <= 0.0 {
             return None;
         }
         let orient = signed.signum();
-        let nb_area3: f64 = nb_faces.iter().map(|&g| self.area3[g as usize]).sum();
         let density = unsigned / nb_area3.max(f64::MIN_POSITIVE); // UV area per 3-D area
         let scale = density.sqrt(); // UV length per 3-D length
         // Seeds: the neighbour's coordinate at each vertex of a shared edge (or of the longest).
@@ -438,15 +456,37 @@ impl Work<'_> {
             .collect();
         let set: Vec<u32> = (0..all.len() as u32).collect();
         let distortion = |n: usize| area_distortion(&area_3d, &area_uv, &set[..n]).value.unwrap_or(1.0);
-        if distortion(all.len()) > distortion(nb_faces.len()) + MAX_DISTORTION_RISE {
+        let alone = alone.unwrap_or_else(|| distortion(nb_faces.len()));
+        let grown = distortion(all.len());
+        if let Some(sums) = &mut self.sums[nb as usize] {
+            sums.distortion = Some(alone);
+        }
+        if grown > alone + MAX_DISTORTION_RISE {
             return None;
         }
         let corners = faces.iter().map(|&f| self.mesh.triangles[f as usize].map(|v| at[&v])).collect();
         Some(Placed { corners, new_values })
     }
 
+    /// Island `nb`'s [`NeighbourSums`], from the cache or a pass over its faces.
+    fn neighbour_sums(&mut self, nb: u32) -> NeighbourSums {
+        if let Some(sums) = self.sums[nb as usize] {
+            return sums;
+        }
+        let nb_faces = &self.members[nb as usize];
+        let sums = NeighbourSums {
+            signed: nb_faces.iter().map(|&g| self.uv_area2(self.tris[g as usize])).sum(),
+            unsigned: nb_faces.iter().map(|&g| self.uv_area2(self.tris[g as usize]).abs()).sum(),
+            area3: nb_faces.iter().map(|&g| self.area3[g as usize]).sum(),
+            distortion: None,
+        };
+        self.sums[nb as usize] = Some(sums);
+        sums
+    }
+
     /// Moves face `f` from island `own` to `nb`, its corners as `placed` says.
     fn move_face(&mut self, f: u32, own: u32, nb: u32, placed: Placed) {
+        (self.sums[own as usize], self.sums[nb as usize]) = (None, None);
         let base = self.coords.len() as u32;
         self.coords.extend_from_slice(&placed.new_values);
         self.tris[f as usize] = placed.corners[0].map(|c| match c {
@@ -460,6 +500,7 @@ impl Work<'_> {
 
     /// Writes `placed` for island `s`'s `faces`, which now belong to `nb`.
     fn commit(&mut self, s: usize, nb: u32, faces: &[u32], placed: Placed) {
+        (self.sums[s], self.sums[nb as usize]) = (None, None);
         let base = self.coords.len() as u32;
         self.coords.extend_from_slice(&placed.new_values);
         for (&f, corners) in faces.iter().zip(&placed.corners) {
