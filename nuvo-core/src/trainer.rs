@@ -364,8 +364,8 @@ impl Trainer {
         Ok(total.unwrap_or_else(|| ctx.tape.constant(Shape::SCALAR, 0.0)))
     }
 
-    /// `training.chart_support` at `step`: 0 while a term that reads every chart everywhere
-    /// weighs in (see [`Term::suspends_chart_support`]).
+    /// `training.chart_support` at `step`: 0 while a term flagged
+    /// [`Term::suspends_chart_support`] (the warm-start prior) weighs in.
     fn chart_support_at(&self, step: u64) -> f32 {
         if self.terms.iter().any(|t| t.suspends_chart_support && t.weight_at(step) > 0.0) {
             0.0
