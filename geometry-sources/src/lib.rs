@@ -18,6 +18,7 @@
 
 #![warn(missing_docs)]
 
+pub mod appearance;
 pub mod camera;
 pub(crate) mod coords;
 pub mod density;
