@@ -18,6 +18,7 @@
 //! | [`join`] | joining small islands into a neighbouring one where that stays injective |
 //! | [`refine`] | local/global ARAP refinement of each UV island from its current UVs, never adding flips |
 //! | [`injective`] | every island made injective (no flip, no self-overlap) and its distortion lowered by SLIM |
+//! | [`texture`] | baking a colour texture (the input's appearance) through the atlas's UVs, gutters filled |
 //! | [`untangle`] | turning flipped faces back by moving single UV vertices (the bake's option) |
 //! | [`load`] | choosing the mesh reader by extension |
 //!
@@ -48,6 +49,7 @@ pub mod refine;
 pub mod render;
 #[cfg(test)]
 mod testmesh;
+pub mod texture;
 pub mod untangle;
 pub mod uvstats;
 
