@@ -162,6 +162,10 @@ impl GeometrySource for MeshSource {
         Some(&self.input_positions)
     }
 
+    fn file(&self) -> Option<&std::path::Path> {
+        Some(&self.path)
+    }
+
     fn describe(&self) -> String {
         let mode = match &self.sampler {
             Sampler::Uniform(_) => "uniform sampling".to_owned(),

@@ -198,6 +198,10 @@ impl GeometrySource for PointCloudSource {
         self.to_canonical
     }
 
+    fn file(&self) -> Option<&std::path::Path> {
+        Some(&self.path)
+    }
+
     fn describe(&self) -> String {
         format!(
             "point cloud {}: {} points, {} normals",

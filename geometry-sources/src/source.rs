@@ -1,5 +1,7 @@
 //! The [`GeometrySource`] trait: what the trainer needs from any scene representation.
 
+use std::path::Path;
+
 use crate::frame::{Aabb, Similarity};
 use crate::mesh::TriMesh;
 
@@ -52,6 +54,12 @@ pub trait GeometrySource: Send + Sync {
     /// the source read them from a file: writers use them instead of mapping the canonical ones back,
     /// which would change the last bits of a user's coordinates.
     fn input_positions(&self) -> Option<&[[f32; 3]]> {
+        None
+    }
+
+    /// The file the geometry was read from, when there is one: where its colours are looked for
+    /// when a bake carries the input's appearance over (`crate::appearance`).
+    fn file(&self) -> Option<&Path> {
         None
     }
 

@@ -41,6 +41,11 @@ pub struct BakeArgs {
     /// (repeatable; the `output` table is what a bake reads).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     set: Vec<String>,
+    /// Bake the colours of this file into texture.png through the run's atlas (a mesh with
+    /// vertex colours or textures, or a coloured point cloud, placed like the trained geometry,
+    /// e.g. a high-resolution scan); sets `output.texture` and `output.texture_from`.
+    #[arg(long, value_name = "FILE")]
+    texture_from: Option<PathBuf>,
 }
 
 pub fn train(args: &TrainArgs) -> anyhow::Result<()> {
@@ -84,7 +89,14 @@ pub fn train(args: &TrainArgs) -> anyhow::Result<()> {
 /// geometry to bake onto from its stored config (not read at all with `output.bake_mesh`); no
 /// losses, plugins or optimiser are built, so a run whose loss plugin is gone still bakes.
 pub fn bake(args: &BakeArgs) -> anyhow::Result<()> {
-    let (ckpt, loaded, ckpt_path) = load_run(&args.run, &args.set)?;
+    let (ckpt, mut loaded, ckpt_path) = load_run(&args.run, &args.set)?;
+    if let Some(file) = &args.texture_from {
+        if !file.is_file() {
+            anyhow::bail!("--texture-from {}: no such file", file.display());
+        }
+        loaded.config.output.texture = true;
+        loaded.config.output.texture_from = Some(std::path::absolute(file).unwrap_or_else(|_| file.clone()));
+    }
     let mut atlas = TrainedAtlas::from_checkpoint(&ckpt, &loaded.config)
         .with_context(|| format!("the checkpoint {}", ckpt_path.display()))?;
     println!(
@@ -215,6 +227,20 @@ fn print_report(report: &OutputReport, seconds: f64) {
                 n.cuts, n.efficiency_before, n.efficiency_after, n.trials
             );
         }
+    }
+    if let Some(t) = report.metrics.as_ref().and_then(|m| m.texture.as_ref()) {
+        println!(
+            "       texture {}² from {} ({}): {} texels covered, {} on island edges, {} filled from neighbours",
+            t.texels.resolution,
+            t.from.display(),
+            t.lookup,
+            t.texels.covered_texels,
+            t.texels.edge_texels,
+            t.texels.filled_texels
+        );
+    }
+    for w in &report.warnings {
+        eprintln!("warning: {w}");
     }
     for f in &report.files {
         println!("wrote {}", f.display());

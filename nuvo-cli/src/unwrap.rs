@@ -10,7 +10,7 @@ use nuvo_core::run::{RunOptions, run};
 use nuvo_core::trainer::build_source;
 use nuvo_core::unwrap::{
     Decision, InputKind, RecipeInput, chart_trials, check_mesh, choose_charts, choose_orientation,
-    choose_sampling, fit_steps, input_kind, profile_mesh, recipe,
+    choose_sampling, choose_texture, fit_steps, input_kind, profile_mesh, recipe,
 };
 use nuvo_core::{LoadedConfig, Trainer, config};
 use nuvo_geometry::mesh_source::{MeshOptions, MeshSource, SamplingMode};
@@ -114,6 +114,7 @@ pub fn run_unwrap(args: &UnwrapArgs) -> anyhow::Result<()> {
         stop_after_seconds: Some(SAFETY_STOP * args.time_budget),
         seed: args.seed,
         bounds: None,
+        texture: false,
     };
     let (mut mesh, mut profile) = (None, None);
     match kind {
@@ -159,6 +160,20 @@ pub fn run_unwrap(args: &UnwrapArgs) -> anyhow::Result<()> {
                     why: format!("from the grid's header {}", input.with_extension("json").display()),
                 });
             }
+        }
+    }
+
+    // The input's colour, carried into texture.png when there is a mesh to bake it onto.
+    if !user_set("output.texture") {
+        let t = Instant::now();
+        let (texture, d, warnings) = choose_texture(&input, kind, user_set("output.bake_mesh"))?;
+        for w in warnings {
+            eprintln!("warning: {w}");
+        }
+        recipe_input.texture = texture;
+        if let Some(mut d) = d {
+            d.why += &format!(" (read in {:.1} s)", t.elapsed().as_secs_f64());
+            decisions.push(d);
         }
     }
 

@@ -140,6 +140,38 @@ fn a_new_mesh_unwraps_with_no_config_and_keeps_its_vertices_and_faces() {
 }
 
 #[test]
+fn an_input_with_colour_gets_its_colour_baked_into_texture_png() {
+    let dir = tempfile::tempdir().unwrap();
+    let plain = dir.path().join("plain.obj");
+    let (v, f) = write_ellipsoid(&plain);
+    // The same ellipsoid with a vertex colour of its height.
+    let coloured: Vec<String> = v
+        .iter()
+        .map(|l| {
+            let z = numbers(l)[2];
+            format!("{l} {} 0.2 {}", (z - 0.3).clamp(0.0, 1.0), (1.0 - z).clamp(0.0, 1.0))
+        })
+        .collect();
+    let input = dir.path().join("coloured.obj");
+    std::fs::write(&input, format!("{}\n{}\n", coloured.join("\n"), f.join("\n"))).unwrap();
+    let out = dir.path().join("run");
+    let o = unwrap(&input, &out, &["--charts", "2"]);
+    assert!(o.status.success());
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("texture: texture.png (the input has vertex colours"), "{stdout}");
+    assert!(out.join("texture.png").is_file());
+    let config = std::fs::read_to_string(out.join("config.toml")).unwrap();
+    assert!(config.contains("texture = true"), "{config}");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("unwrap.json")).unwrap()).unwrap();
+    assert!(report["decisions"].as_array().unwrap().iter().any(|d| d["what"] == "texture"));
+    // `--set output.texture=false` keeps the checkerboard.
+    let off = dir.path().join("off");
+    assert!(unwrap(&input, &off, &["--charts", "2", "--set", "output.texture=false"]).status.success());
+    assert!(!off.join("texture.png").exists() && off.join("atlas.obj").is_file());
+}
+
+#[test]
 fn config_toml_reproduces_the_run_exactly() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("ellipsoid.obj");

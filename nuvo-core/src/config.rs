@@ -315,6 +315,23 @@ pub struct OutputConfig {
     pub renders: usize,
     /// Side of each render in pixels.
     pub render_resolution: u32,
+    /// Carry the input's appearance over (not in the paper; `nuvo_atlas::texture`): bake its
+    /// colour (vertex colours, its own textures through its own UVs, coloured points) into
+    /// `texture.png` at `atlas_resolution` through the new UVs, and make it the texture of
+    /// `atlas.obj`/`atlas.glb` and the renders (the checkerboard stays in `checker.png`). The
+    /// colour comes from `texture_from` when set, else from `bake_mesh`, else from the geometry's
+    /// own file. Off by default; `nuvo unwrap` turns it on when the input has colour. Input
+    /// without colour, or an image that cannot be read, is a warning and the atlas is written
+    /// without a texture.
+    pub texture: bool,
+    /// With `texture`: the file whose colours to bake (a mesh with vertex colours or textures, or
+    /// a coloured point cloud, placed like the trained geometry), e.g. a high-resolution scan;
+    /// relative to the config's folder. Its colour is looked up at the nearest surface point
+    /// (nearest points, for a point cloud) unless it has exactly the faces baked onto.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub texture_from: Option<PathBuf>,
+    /// With `texture`: sub-texel points per texel side (2: four a texel), against aliasing.
+    pub texture_supersampling: u32,
 }
 
 impl Default for OutputConfig {
@@ -338,6 +355,9 @@ impl Default for OutputConfig {
             eval_resolution: 800,
             renders: 4,
             render_resolution: 512,
+            texture: false,
+            texture_from: None,
+            texture_supersampling: 2,
         }
     }
 }
@@ -656,7 +676,7 @@ impl ExperimentConfig {
 
     /// Makes the input paths written in the file absolute (`base` is the config's folder): every
     /// `path` or `file` key inside `[geometry]` (at any depth), each `losses.NAME.plugin`, and
-    /// `output.bake_mesh`. The resolved
+    /// `output.bake_mesh` and `output.texture_from`. The resolved
     /// config saved with a run then works from any working directory (for `nuvo bake`, `--resume`).
     pub fn absolutize_paths(&mut self, base: &Path) {
         fn visit(t: &mut toml::Table, base: &Path) {
@@ -680,8 +700,10 @@ impl ExperimentConfig {
                 *p = base.join(&*p).to_string_lossy().into_owned();
             }
         }
-        if let Some(m) = self.output.bake_mesh.as_mut().filter(|m| m.is_relative()) {
-            *m = base.join(&*m);
+        for m in [&mut self.output.bake_mesh, &mut self.output.texture_from] {
+            if let Some(m) = m.as_mut().filter(|m| m.is_relative()) {
+                *m = base.join(&*m);
+            }
         }
     }
 
@@ -826,6 +848,15 @@ impl OutputConfig {
         }
         if !(16..=8192).contains(&out.render_resolution) {
             return Err(src.invalid("output.render_resolution", "must be between 16 and 8192 pixels"));
+        }
+        if !(1..=nuvo_atlas::texture::MAX_SUPERSAMPLING).contains(&out.texture_supersampling) {
+            return Err(src.invalid(
+                "output.texture_supersampling",
+                format!(
+                    "must be between 1 and {} points per texel side",
+                    nuvo_atlas::texture::MAX_SUPERSAMPLING
+                ),
+            ));
         }
         Ok(())
     }

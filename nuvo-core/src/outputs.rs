@@ -4,14 +4,21 @@
 //! | file | what |
 //! |---|---|
 //! | `atlas.obj`, `atlas.mtl` | the mesh with per-corner UVs in the packed atlas, input coordinates |
-//! | `atlas.glb` | the same as binary glTF (checkerboard embedded as its texture) |
+//! | `atlas.glb` | the same as binary glTF (`texture.png`, else the checkerboard, embedded as its base colour) |
 //! | `uv_layout.png` | the baked UV triangles coloured by chart, overlaps in red |
-//! | `checker.png` | the checkerboard texture the OBJ's material and the renders use |
+//! | `checker.png` | the checkerboard texture the OBJ's material and the renders use (without `texture.png`) |
+//! | `texture.png` | with `output.texture`: the input's colour baked through the new UVs (`nuvo_atlas::texture`) |
 //! | `renders/view_{k}.png` | the mesh wearing the checkerboard from several views |
 //! | `normal_grids.png` | the learned normal grids `N_i`, packed like the atlas |
 //! | `metrics.json` | Boundary, Stretch, Conformal, Editability, the PartUV metric set, UV statistics and the bake report |
 //! | `vertex_map.json` | for each vertex of `atlas.glb`, the input vertex it copies (seams split vertices) |
 //! | `points_uv.csv` | per-point charts and UVs, when there is no mesh to bake onto |
+//!
+//! **Appearance** (`output.texture`): the colour of the input (or of `output.texture_from`) is
+//! looked up face by face when its file has exactly the faces baked onto (the user's own mesh),
+//! else at the nearest surface point or points (`nuvo_geometry::appearance::NearestColour`).
+//! Anything that stops a texture (no colour in the file, unreadable images, no mesh) is a warning
+//! in [`OutputReport::warnings`]; the atlas is written all the same, with the checkerboard.
 //!
 //! Baking follows the paper's "(b)" rows: the networks are evaluated at the mesh vertices, every face
 //! takes one chart and its corners that chart's UVs (see `nuvo_atlas::bake`).
@@ -37,7 +44,9 @@ use nuvo_atlas::pictures::{
     ChartGrid, chart_grid_image, checkerboard, pack_images, png_bytes, render_textured, uv_layout, write_png,
 };
 use nuvo_atlas::refine::{RefineOptions, RefineReport, refine_islands};
+use nuvo_atlas::texture::{SurfaceColour, TextureOptions, TextureReport, bake_texture};
 use nuvo_atlas::uvstats::{UvAnalysis, analyse_uv};
+use nuvo_geometry::appearance::{Colours, NearestColour, SurfaceColours, load_colours};
 use nuvo_geometry::{GeometryError, GeometrySource, Similarity, TriMesh};
 use serde::Serialize;
 
@@ -50,6 +59,7 @@ pub mod names {
     pub const GLB: &str = "atlas.glb";
     pub const LAYOUT: &str = "uv_layout.png";
     pub const CHECKER: &str = "checker.png";
+    pub const TEXTURE: &str = "texture.png";
     pub const RENDERS: &str = "renders";
     pub const NORMAL_GRIDS: &str = "normal_grids.png";
     pub const METRICS: &str = "metrics.json";
@@ -204,6 +214,22 @@ pub struct OutputMetrics {
     pub layout: LayoutSummary,
     /// Steps trained.
     pub steps: u64,
+    /// What `output.texture` baked (absent when no texture was written).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub texture: Option<TextureSummary>,
+}
+
+/// What `output.texture` baked into `texture.png`.
+#[derive(Clone, Debug, Serialize)]
+pub struct TextureSummary {
+    /// The file whose colours were baked.
+    pub from: PathBuf,
+    /// How colours were found: `"same faces"` (the file's own faces and barycentrics),
+    /// `"nearest surface point"` (another mesh) or `"nearest points"` (a point cloud).
+    pub lookup: &'static str,
+    /// Texel counts of the bake.
+    #[serde(flatten)]
+    pub texels: TextureReport,
 }
 
 /// Wall seconds of each phase of a bake, in the order they ran (`evaluate`, `bake`, `refine`, ...).
@@ -240,6 +266,9 @@ pub struct OutputReport {
     pub baked_uv: Option<nuvo_geometry::UvLayer>,
     /// `None` when there was no mesh to bake onto (per-point UVs were written instead).
     pub metrics: Option<OutputMetrics>,
+    /// What could not be done and was skipped, each naming the file and the problem (e.g. a
+    /// texture image that cannot be read: the atlas is written without that texture).
+    pub warnings: Vec<String>,
 }
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> OutputError + '_ {
@@ -265,7 +294,8 @@ pub fn write_outputs(
         m.uv = None;
         let input = m.positions.clone();
         m.transform(&atlas.frame());
-        return bake_and_measure(atlas, &m, Some(input), dir, opts);
+        let colour_files = [Some(path.as_path()), scene.and_then(|s| s.file())];
+        return bake_and_measure(atlas, &m, Some(input), &colour_files, dir, opts);
     }
     let scene = scene.ok_or(OutputError::NoGeometry)?;
     if !same_frame(&scene.to_canonical(), &atlas.frame()) {
@@ -278,7 +308,8 @@ pub fn write_outputs(
     match scene.mesh() {
         Some(m) => {
             let mesh = TriMesh { uv: None, ..m.clone() };
-            bake_and_measure(atlas, &mesh, scene.input_positions().map(<[_]>::to_vec), dir, opts)
+            let input = scene.input_positions().map(<[_]>::to_vec);
+            bake_and_measure(atlas, &mesh, input, &[scene.file()], dir, opts)
         }
         None => write_point_uvs(atlas, scene, dir, opts),
     }
@@ -295,10 +326,13 @@ fn same_frame(a: &Similarity, b: &Similarity) -> bool {
     close_scale && close_center
 }
 
+/// `colour_files`: where `output.texture` looks for colour when `output.texture_from` is unset,
+/// in order (the bake mesh's file, the geometry's file).
 fn bake_and_measure(
     atlas: &mut TrainedAtlas,
     mesh: &TriMesh,
     input_positions: Option<Vec<[f32; 3]>>,
+    colour_files: &[Option<&Path>],
     dir: &Path,
     opts: &OutputConfig,
 ) -> Result<OutputReport, OutputError> {
@@ -332,9 +366,25 @@ fn bake_and_measure(
     let mut files = Vec::new();
     let path = |name: &str| dir.join(name);
 
+    let mut warnings = Vec::new();
+    let texture = if opts.texture {
+        let t = bake_appearance(&baked.mesh, colour_files, &frame, opts, &mut warnings)?;
+        phases.done("texture");
+        t
+    } else {
+        None
+    };
     let checker = checkerboard(opts.atlas_resolution.min(2048), 8 * layout.columns)?;
     write_png(&path(names::CHECKER), &checker)?;
     files.push(path(names::CHECKER));
+    if let Some((image, _)) = &texture {
+        write_png(&path(names::TEXTURE), image)?;
+        files.push(path(names::TEXTURE));
+    }
+    let (texture_image, texture_name) = match &texture {
+        Some((image, _)) => (image, names::TEXTURE),
+        None => (&checker, names::CHECKER),
+    };
     // Writers get the input's own positions when there are any (bit for bit), else map back.
     let (export, export_frame) = match input_positions {
         Some(positions) if positions.len() == baked.mesh.positions.len() => {
@@ -343,10 +393,10 @@ fn bake_and_measure(
         }
         _ => (baked.mesh.clone(), frame),
     };
-    write_obj(&path(names::OBJ), &export, &export_frame, Some(Path::new(names::CHECKER)))?;
+    write_obj(&path(names::OBJ), &export, &export_frame, Some(Path::new(texture_name)))?;
     files.push(path(names::OBJ));
     files.push(path(names::OBJ).with_extension("mtl"));
-    let png = png_bytes(&checker)?;
+    let png = png_bytes(texture_image)?;
     write_glb(
         &path(names::GLB),
         &export,
@@ -369,7 +419,7 @@ fn bake_and_measure(
         &uv_layout(&baked.mesh, Some(&baked.face_chart), opts.atlas_resolution.min(2048))?,
     )?;
     files.push(path(names::LAYOUT));
-    files.extend(write_renders(&baked.mesh, &checker, dir, opts)?);
+    files.extend(write_renders(&baked.mesh, texture_image, dir, opts)?);
     files.push(write_normal_grids(atlas, &layout, dir)?);
     phases.done("pictures");
 
@@ -381,6 +431,7 @@ fn bake_and_measure(
         bake: summarize(&baked.report, recount.as_ref(), &baked.face_chart, n),
         layout: finished,
         steps: atlas.steps(),
+        texture: texture.map(|(_, summary)| summary),
     };
     let json = serde_json::to_string_pretty(&summary)
         .map_err(|e| io_err(&path(names::METRICS))(std::io::Error::other(e)))?;
@@ -388,7 +439,87 @@ fn bake_and_measure(
         .map_err(io_err(&path(names::METRICS)))?;
     files.push(path(names::METRICS));
     phases.done("metrics");
-    Ok(OutputReport { files, phase_seconds: phases.seconds, baked_uv: baked.mesh.uv, metrics: Some(summary) })
+    Ok(OutputReport {
+        files,
+        phase_seconds: phases.seconds,
+        baked_uv: baked.mesh.uv,
+        metrics: Some(summary),
+        warnings,
+    })
+}
+
+/// How the colour of a point of the mesh being textured is found.
+enum ColourLookup<'a> {
+    /// The colour file has exactly the mesh's faces: the same face and barycentrics.
+    SameFaces(&'a SurfaceColours),
+    /// The nearest surface point or points of the colour file (in the mesh's frame).
+    Nearest(NearestColour),
+}
+
+impl SurfaceColour for ColourLookup<'_> {
+    fn colour(&self, face: usize, bary: [f32; 3], point: [f32; 3]) -> [f32; 3] {
+        match self {
+            ColourLookup::SameFaces(s) => s.colour(face, bary),
+            ColourLookup::Nearest(n) => n.colour_at(point),
+        }
+    }
+}
+
+/// Bakes the colour `output.texture` asks for through `mesh`'s UVs (`mesh` in the frame
+/// `frame` maps the input into). The file is `output.texture_from`, else the first of
+/// `colour_files` that has colour. Whatever prevents a texture is pushed onto `warnings` and gives
+/// `None`: the atlas is then written with the checkerboard.
+fn bake_appearance(
+    mesh: &TriMesh,
+    colour_files: &[Option<&Path>],
+    frame: &Similarity,
+    opts: &OutputConfig,
+    warnings: &mut Vec<String>,
+) -> Result<Option<(nuvo_atlas::pictures::RgbImage, TextureSummary)>, OutputError> {
+    let candidates: Vec<&Path> = match &opts.texture_from {
+        Some(p) => vec![p.as_path()],
+        None => colour_files.iter().flatten().copied().collect(),
+    };
+    let mut found = None;
+    for path in &candidates {
+        match load_colours(path) {
+            Ok(loaded) => {
+                warnings.extend(loaded.warnings);
+                if let Some(colours) = loaded.colours {
+                    found = Some((path.to_path_buf(), colours));
+                    break;
+                }
+            }
+            Err(e) => warnings.push(format!("output.texture: cannot read the colours: {e}")),
+        }
+    }
+    let Some((from, colours)) = found else {
+        let files: Vec<String> = candidates.iter().map(|p| p.display().to_string()).collect();
+        warnings.push(if files.is_empty() {
+            "output.texture: no file to take colours from (set output.texture_from); no texture.png written"
+                .to_owned()
+        } else {
+            format!(
+                "output.texture: {} carries no colour (no vertex or point colours, no texture that could be \
+                 read, at most one material colour); no texture.png written",
+                files.join(", ")
+            )
+        });
+        return Ok(None);
+    };
+    let lookup = match &colours {
+        Colours::Surface(s) if s.mesh.triangles == mesh.triangles => ColourLookup::SameFaces(s),
+        other => ColourLookup::Nearest(NearestColour::new(other, frame)),
+    };
+    let kind = match (&lookup, &colours) {
+        (ColourLookup::SameFaces(_), _) => "same faces",
+        (_, Colours::Surface(_)) => "nearest surface point",
+        (_, Colours::Points(_)) => "nearest points",
+    };
+    let texture_opts =
+        TextureOptions { resolution: opts.atlas_resolution, supersampling: opts.texture_supersampling };
+    let baked = bake_texture(mesh, &lookup, &texture_opts)?;
+    Ok(Some((baked.image, TextureSummary { from, lookup: kind, texels: baked.report })))
 }
 
 /// The bake's counts; flips, overlaps and degenerate faces from `recount` when refinement or
@@ -492,7 +623,21 @@ fn write_point_uvs(
     let path = dir.join(names::POINTS);
     nuvo_fsio::write_bytes_atomic(&path, csv.as_bytes()).map_err(io_err(&path))?;
     phases.done("points");
-    Ok(OutputReport { files: vec![path], phase_seconds: phases.seconds, baked_uv: None, metrics: None })
+    let warnings = if opts.texture {
+        vec![format!(
+            "output.texture: {} has no mesh to bake a texture onto (set output.bake_mesh); no texture.png written",
+            scene.describe()
+        )]
+    } else {
+        Vec::new()
+    };
+    Ok(OutputReport {
+        files: vec![path],
+        phase_seconds: phases.seconds,
+        baked_uv: None,
+        metrics: None,
+        warnings,
+    })
 }
 
 #[cfg(test)]

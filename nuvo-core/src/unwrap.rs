@@ -202,6 +202,8 @@ pub struct RecipeInput<'a> {
     pub seed: u64,
     /// Density grids only: `[[min], [max]]` of the grid nodes, from a sidecar header.
     pub bounds: Option<[[f32; 3]; 2]>,
+    /// Bake the input's colour into `texture.png` (`output.texture`; [`choose_texture`]).
+    pub texture: bool,
 }
 
 /// The config text of a run (module docs). The recipe is `configs/bunny.toml`'s: small networks, a
@@ -257,6 +259,9 @@ pub fn recipe(r: &RecipeInput) -> String {
     if !clean {
         bake += "injective_split_energy = inf\n";
     }
+    if r.texture {
+        bake += "texture = true\n";
+    }
     // On a clean surface training stops once the chart assignment holds still: the steps after
     // that mostly merge the last small charts, while the baked atlas's scores stay within their
     // step-to-step noise. Fragmented inputs train to their budget: their noisy argmax settles
@@ -284,6 +289,49 @@ pub fn recipe(r: &RecipeInput) -> String {
         charts = r.charts,
         steps = r.steps,
     )
+}
+
+/// Whether to bake the input's colour into a texture (`output.texture`): yes when the file carries
+/// colour ([`nuvo_geometry::appearance::load_colours`]) and there is a mesh to bake onto (a
+/// point cloud needs `has_bake_mesh`). Returns the choice, the decision to print when the file
+/// has colour, and the reader's warnings (images that cannot be read: the atlas is written
+/// without them). Errors only where the geometry itself cannot be read.
+pub fn choose_texture(
+    path: &Path,
+    kind: InputKind,
+    has_bake_mesh: bool,
+) -> Result<(bool, Option<Decision>, Vec<String>), nuvo_geometry::GeometryError> {
+    use nuvo_geometry::appearance::{Colours, load_colours};
+    let loaded = load_colours(path)?;
+    let Some(colours) = &loaded.colours else { return Ok((false, None, loaded.warnings)) };
+    let what = match colours {
+        Colours::Surface(s) => {
+            let textures = s.materials.iter().filter(|m| m.texture.is_some()).count();
+            let mut parts = Vec::new();
+            if s.vertex_colours.is_some() {
+                parts.push("vertex colours".to_owned());
+            }
+            if textures > 0 {
+                parts.push(format!("{textures} texture(s) through its own UVs"));
+            }
+            if parts.is_empty() {
+                parts.push(format!("{} material colours", s.materials.len()));
+            }
+            parts.join(" and ")
+        }
+        Colours::Points(p) => format!("colours on its {} points", p.colours.len()),
+    };
+    let usable = kind != InputKind::PointCloud || has_bake_mesh;
+    let decision = Decision {
+        what: "texture".into(),
+        choice: if usable { "texture.png" } else { "none" }.into(),
+        why: if usable {
+            format!("the input has {what}: baked through the new UVs")
+        } else {
+            format!("the input has {what}, but a point cloud has no mesh to bake onto (set output.bake_mesh)")
+        },
+    };
+    Ok((usable, Some(decision), loaded.warnings))
 }
 
 /// How well `charts` projection charts start a sample of the surface (see [`Coverage`]).
@@ -547,6 +595,7 @@ mod tests {
             stop_after_seconds: Some(90.0),
             seed: 3,
             bounds: None,
+            texture: false,
         };
         let clean = crate::config::from_str("clean", &recipe(&base)).unwrap().config;
         assert_eq!((clean.model.charts, clean.training.steps, clean.seed), (5, 900, 3));
@@ -582,5 +631,8 @@ mod tests {
         let cloud = RecipeInput { kind: InputKind::PointCloud, ..base };
         let c = crate::config::from_str("cloud", &recipe(&cloud)).unwrap().config;
         assert_eq!(c.training.stop_when_settled, Some(0.015), "a point cloud is a clean surface");
+        assert!(!clean.output.texture, "no texture unless the input has colour");
+        let coloured = RecipeInput { texture: true, ..base };
+        assert!(crate::config::from_str("coloured", &recipe(&coloured)).unwrap().config.output.texture);
     }
 }
