@@ -10,7 +10,14 @@ use crate::mesh::{TriMesh, UvLayer};
 /// reported as malformed rather than silently mixed.
 pub fn load_obj(path: &Path) -> Result<TriMesh, GeometryError> {
     let opts = tobj::LoadOptions { triangulate: true, single_index: false, ..Default::default() };
-    let (models, _materials) = tobj::load_obj(path, &opts).map_err(|e| match e {
+    // `tobj::load_obj` with the MTL files checked first (see `load_mtl_checked`).
+    let loaded = match std::fs::File::open(path) {
+        Ok(f) => tobj::load_obj_buf(&mut std::io::BufReader::new(f), &opts, |mtl| {
+            load_mtl_checked(&path.parent().map_or_else(|| mtl.to_path_buf(), |dir| dir.join(mtl)))
+        }),
+        Err(_) => Err(tobj::LoadError::OpenFileFailed),
+    };
+    let (models, _materials) = loaded.map_err(|e| match e {
         tobj::LoadError::OpenFileFailed => GeometryError::Io {
             path: path.to_path_buf(),
             source: std::fs::metadata(path).err().unwrap_or_else(|| std::io::Error::other("cannot open")),
@@ -67,6 +74,23 @@ pub fn load_obj(path: &Path) -> Result<TriMesh, GeometryError> {
     }
     mesh.validate().map_err(|m| GeometryError::invalid(path, m))?;
     Ok(mesh)
+}
+
+/// `tobj::load_mtl`, except that a colour line (`Ka`, `Kd`, `Ks`, `Ke`) with fewer than three
+/// values is a parse error instead of a panic inside tobj (whose `parse_float3` unwraps). A failed
+/// MTL only loses its materials (the mesh does not use them), as with any other MTL error.
+fn load_mtl_checked(path: &Path) -> tobj::MTLLoadResult {
+    let Ok(text) = std::fs::read_to_string(path) else {
+        return tobj::load_mtl(path); // tobj's own error (missing, not UTF-8, ...)
+    };
+    let short_colour = text.lines().any(|line| {
+        let mut words = line.split_whitespace();
+        matches!(words.next(), Some("Ka" | "Kd" | "Ks" | "Ke")) && words.count() < 3
+    });
+    if short_colour {
+        return Err(tobj::LoadError::MaterialParseError);
+    }
+    tobj::load_mtl_buf(&mut text.as_bytes())
 }
 
 /// The mesh's vertices in the file's own order (every `v` line, referenced or not) and its faces
@@ -166,6 +190,14 @@ mod tests {
         assert_eq!(m.positions[4], [9.0, 9.0, 9.0]);
         assert_eq!(m.positions[2], [1.0, 1.0, 0.0]);
         assert_eq!(m.triangles, vec![[2, 3, 0], [2, 1, 0]]);
+    }
+
+    #[test]
+    fn a_short_colour_line_in_the_mtl_loses_the_materials_not_the_mesh() {
+        // tobj itself panics on `Kd 0.5`.
+        write("short.mtl", "newmtl m\nKd 0.5\n");
+        let p = write("short.obj", "mtllib short.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl m\nf 1 2 3\n");
+        assert_eq!(load_obj(&p).unwrap().triangles.len(), 1);
     }
 
     #[test]
