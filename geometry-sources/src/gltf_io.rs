@@ -271,7 +271,7 @@ fn det3(m: &Mat4) -> f32 {
 }
 
 /// Checks that `acc` can be read as `dims` with one of `types` without trusting the file.
-fn check_accessor(
+pub(crate) fn check_accessor(
     acc: &gltf::Accessor,
     what: &str,
     dims: Dimensions,

@@ -9,8 +9,45 @@ use crate::mesh::{TriMesh, UvLayer};
 /// coordinates are kept per corner when every face has them; a file where only some faces do is
 /// reported as malformed rather than silently mixed.
 pub fn load_obj(path: &Path) -> Result<TriMesh, GeometryError> {
+    load_obj_full(path, false).map(|read| read.mesh)
+}
+
+/// What [`load_obj_full`] reads besides the mesh, for the appearance reader
+/// ([`crate::appearance`]); empty unless asked for.
+#[derive(Debug, Default)]
+pub(crate) struct ObjAppearance {
+    /// The materials of every `mtllib` tobj could read (`Err` when it could read none and one
+    /// failed).
+    pub materials: Option<Result<Vec<tobj::Material>, tobj::LoadError>>,
+    /// Per face of the mesh, tobj's material index (`None`: no or an unknown `usemtl`).
+    pub face_material: Vec<Option<usize>>,
+    /// Per vertex of the mesh, its colour as the file writes it (unscaled), `None` for a vertex
+    /// without one.
+    pub vertex_colours: Vec<Option<[f32; 3]>>,
+    /// The file names of the `mtllib` lines, in file order.
+    pub mtllibs: Vec<String>,
+}
+
+/// The mesh [`load_obj`] returns and, when `appearance` is set, what the appearance reader needs.
+pub(crate) struct ObjRead {
+    /// Exactly [`load_obj`]'s mesh.
+    pub mesh: TriMesh,
+    /// Filled only when asked for.
+    pub appearance: ObjAppearance,
+}
+
+/// [`load_obj`], optionally keeping the materials, the faces' materials and the vertex colours.
+/// The mesh and the errors are the same either way.
+pub(crate) fn load_obj_full(path: &Path, appearance: bool) -> Result<ObjRead, GeometryError> {
     let opts = tobj::LoadOptions { triangulate: true, single_index: false, ..Default::default() };
-    let (models, _materials) = tobj::load_obj(path, &opts).map_err(|e| match e {
+    // `tobj::load_obj` with the MTL files checked first (see `load_mtl_checked`).
+    let loaded = match std::fs::File::open(path) {
+        Ok(f) => tobj::load_obj_buf(&mut std::io::BufReader::new(f), &opts, |mtl| {
+            load_mtl_checked(&path.parent().map_or_else(|| mtl.to_path_buf(), |dir| dir.join(mtl)))
+        }),
+        Err(_) => Err(tobj::LoadError::OpenFileFailed),
+    };
+    let (models, materials) = loaded.map_err(|e| match e {
         tobj::LoadError::OpenFileFailed => GeometryError::Io {
             path: path.to_path_buf(),
             source: std::fs::metadata(path).err().unwrap_or_else(|| std::io::Error::other("cannot open")),
@@ -20,8 +57,18 @@ pub fn load_obj(path: &Path) -> Result<TriMesh, GeometryError> {
     let mut mesh = TriMesh::default();
     let mut uv = UvLayer::default();
     let mut faces_with_uv = 0usize;
+    let mut extra = ObjAppearance::default();
     for model in &models {
         let m = &model.mesh;
+        if appearance {
+            extra.face_material.extend(std::iter::repeat_n(m.material_id, m.indices.len() / 3));
+            let nv = m.positions.len() / 3;
+            if m.vertex_color.len() == 3 * nv {
+                extra.vertex_colours.extend(m.vertex_color.chunks_exact(3).map(|c| Some([c[0], c[1], c[2]])));
+            } else {
+                extra.vertex_colours.extend(std::iter::repeat_n(None, nv));
+            }
+        }
         let v0 = mesh.positions.len() as u32;
         let t0 = uv.coords.len() as u32;
         mesh.positions.extend(m.positions.chunks_exact(3).map(|c| [c[0], c[1], c[2]]));
@@ -64,9 +111,54 @@ pub fn load_obj(path: &Path) -> Result<TriMesh, GeometryError> {
     if let Some(numbered) = in_file_order(&text, &mesh) {
         mesh.positions = numbered.positions;
         mesh.triangles = numbered.triangles;
+        if appearance {
+            // The vertices are now the file's `v` lines, so their colours are too.
+            extra.vertex_colours = file_vertex_colours(&text);
+        }
     }
     mesh.validate().map_err(|m| GeometryError::invalid(path, m))?;
-    Ok(mesh)
+    if appearance {
+        extra.materials = Some(materials);
+        extra.mtllibs = text
+            .lines()
+            .filter_map(|l| l.trim_start().strip_prefix("mtllib"))
+            .filter(|rest| rest.starts_with(char::is_whitespace))
+            .map(|rest| rest.trim().to_owned())
+            .filter(|name| !name.is_empty())
+            .collect();
+    }
+    Ok(ObjRead { mesh, appearance: extra })
+}
+
+/// `tobj::load_mtl`, except that a colour line (`Ka`, `Kd`, `Ks`, `Ke`) with fewer than three
+/// values is a parse error instead of a panic inside tobj (whose `parse_float3` unwraps). A failed
+/// MTL only loses its materials (the mesh does not use them), as with any other MTL error.
+fn load_mtl_checked(path: &Path) -> tobj::MTLLoadResult {
+    let Ok(text) = std::fs::read_to_string(path) else {
+        return tobj::load_mtl(path); // tobj's own error (missing, not UTF-8, ...)
+    };
+    let short_colour = text.lines().any(|line| {
+        let mut words = line.split_whitespace();
+        matches!(words.next(), Some("Ka" | "Kd" | "Ks" | "Ke")) && words.count() < 3
+    });
+    if short_colour {
+        return Err(tobj::LoadError::MaterialParseError);
+    }
+    tobj::load_mtl_buf(&mut text.as_bytes())
+}
+
+/// The colour of every `v` line of `text` in file order: `v x y z r g b` gives `Some([r, g, b])`
+/// (as written), any other `v` line `None`.
+fn file_vertex_colours(text: &str) -> Vec<Option<[f32; 3]>> {
+    text.lines()
+        .filter_map(|line| {
+            let mut words = line.split_whitespace();
+            (words.next() == Some("v")).then(|| {
+                let numbers: Vec<f32> = words.map_while(|w| w.parse().ok()).collect();
+                (numbers.len() == 6).then(|| [numbers[3], numbers[4], numbers[5]])
+            })
+        })
+        .collect()
 }
 
 /// The mesh's vertices in the file's own order (every `v` line, referenced or not) and its faces
@@ -166,6 +258,17 @@ mod tests {
         assert_eq!(m.positions[4], [9.0, 9.0, 9.0]);
         assert_eq!(m.positions[2], [1.0, 1.0, 0.0]);
         assert_eq!(m.triangles, vec![[2, 3, 0], [2, 1, 0]]);
+    }
+
+    #[test]
+    fn a_short_colour_line_in_the_mtl_loses_the_materials_not_the_mesh() {
+        // tobj itself panics on `Kd 0.5`.
+        write("short.mtl", "newmtl m\nKd 0.5\n");
+        let p = write("short.obj", "mtllib short.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl m\nf 1 2 3\n");
+        assert_eq!(load_obj(&p).unwrap().triangles.len(), 1);
+        let read = load_obj_full(&p, true).unwrap();
+        assert!(matches!(read.appearance.materials, Some(Err(tobj::LoadError::MaterialParseError))));
+        assert_eq!(read.appearance.face_material, vec![None]);
     }
 
     #[test]

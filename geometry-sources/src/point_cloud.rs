@@ -51,7 +51,7 @@ fn default_neighbors() -> usize {
 #[serde(deny_unknown_fields)]
 pub struct PointCloudOptions {
     /// The point file: `.ply` (ASCII or binary; `vertex` element with `x y z` and optionally
-    /// `nx ny nz`) or plain text `.xyz`/`.txt`/`.pts` (`x y z [nx ny nz]` per line). Relative paths
+    /// `nx ny nz`) or plain text `.xyz`/`.txt`/`.pts` (`x y z [nx ny nz [r g b]]` per line). Relative paths
     /// resolve against the config's folder. Required.
     pub path: PathBuf,
     /// `"auto"` (default), `"file"` or `"estimate"`; see [`NormalSource`].
