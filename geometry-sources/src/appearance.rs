@@ -14,7 +14,7 @@
 //!
 //! | input | colours |
 //! |---|---|
-//! | `.obj` | `v x y z r g b` vertex colours; per face its `usemtl` material from the `mtllib` files: `Kd` (base colour, white without one) and `map_Kd` (texture) |
+//! | `.obj` | `v x y z r g b` vertex colours; per face its `usemtl` material from the `mtllib` files: `Kd` (base colour, white without one) and `map_Kd` (texture; `Kd` is then not applied, as exporters write it beside a texture as a fallback) |
 //! | `.gltf`, `.glb` | `COLOR_0` (`VEC3`/`VEC4`; float, normalised `ubyte` or `ushort`); per primitive its material's `pbrMetallicRoughness.baseColorFactor` (RGB) and `baseColorTexture` (a `data:` URI, a file next to the `.gltf`, or a buffer view) |
 //! | `.ply` | the `vertex` element's `red green blue` (or `r g b`, or `diffuse_red diffuse_green diffuse_blue`): integers `0..=255` (`ushort`: `0..=65535`), `float`/`double` in `[0, 1]` |
 //! | `.xyz`, `.txt`, `.pts` | nine columns `x y z nx ny nz r g b` (`0..=255` when any colour value exceeds 1, else `[0, 1]`) |

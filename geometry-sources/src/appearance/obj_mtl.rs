@@ -68,13 +68,16 @@ pub(super) fn obj_colours(path: &Path) -> Result<LoadedColours, GeometryError> {
         .iter()
         .zip(&used)
         .map(|(m, &used)| {
-            let base_colour = m.diffuse.unwrap_or([1.0; 3]);
             let texture = match (&m.diffuse_texture, used) {
                 (Some(spec), true) => {
                     texture(path, &m.name, spec, &mtl_dirs, mesh.uv.is_some(), &mut cache, &mut warnings)
                 }
                 _ => None,
             };
+            // With a texture, `Kd` is not applied: exporters write it beside `map_Kd` as a
+            // fallback (Blender 0.8, photogrammetry tools 0.6), and importers show the texture
+            // alone; multiplying would darken the carried-over colours.
+            let base_colour = if texture.is_some() { [1.0; 3] } else { m.diffuse.unwrap_or([1.0; 3]) };
             Material { name: m.name.clone(), base_colour, texture }
         })
         .collect();

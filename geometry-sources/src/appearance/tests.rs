@@ -188,7 +188,8 @@ fn obj_texture_is_sampled_through_the_uvs() {
     // Face 1 has UVs (0,0), (1,1), (0,1): uv (0.25, 0.75) is top-left (red).
     assert_close(s.colour(1, [0.25, 0.25, 0.5]), [1.0, 0.0, 0.0], 1e-5);
 
-    // Kd multiplies the texture; options before the name are skipped (scale warned about).
+    // Kd is not applied over a texture (exporters write it as a fallback); options before the
+    // name are skipped (scale warned about).
     let p = textured_quad(
         dir.path(),
         "dark",
@@ -197,7 +198,7 @@ fn obj_texture_is_sampled_through_the_uvs() {
     let loaded = load_colours(&p).unwrap();
     assert_eq!(loaded.warnings.len(), 1, "{:?}", loaded.warnings);
     assert!(loaded.warnings[0].contains("-s 1 1 1"), "{:?}", loaded.warnings);
-    assert_close(surface(&loaded).colour(0, [0.25, 0.5, 0.25]), [0.5; 3], 1e-5);
+    assert_close(surface(&loaded).colour(0, [0.25, 0.5, 0.25]), [1.0; 3], 1e-5);
 }
 
 #[test]
