@@ -244,9 +244,8 @@ pub fn bake_texture(
                             for &ox in &offsets {
                                 let l = t.barycentrics([x as f64 + ox, y as f64 + oy]);
                                 if l.iter().all(|&c| c >= 0.0) {
-                                    let c = shade(l);
-                                    for k in 0..3 {
-                                        texel.sum[k] += c[k];
+                                    for (sum, c) in texel.sum.iter_mut().zip(shade(l)) {
+                                        *sum += c;
                                     }
                                     texel.samples += 1;
                                     hit = true;
