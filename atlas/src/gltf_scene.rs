@@ -27,7 +27,13 @@
 //!   and winding (`mode` 4); indices are `u16` when every vertex fits (at most 65 535), else `u32`.
 //!
 //! Materials are untouched: a texture they map through `TEXCOORD_0` is now sampled with the new
-//! UVs (bake a new one); textures on other `texCoord` sets keep working as before.
+//! UVs (bake a new one); textures on other `texCoord` sets keep working as before. **With a baked
+//! base colour** (`base_colour_png`, the input's appearance baked through the new UVs), the
+//! rewritten primitives get it instead: each material they use is copied (`NAME (nuvo)`; the
+//! original stays for anything else that uses it) with the PNG, embedded, as its
+//! `baseColorTexture` on `TEXCOORD_0` and its `baseColorFactor` RGB set to 1 (the factor is in
+//! the bake; alpha is kept), primitives without a material get a new one, and their `COLOR_0`,
+//! also in the bake, is kept as `_NUVO_BAKED_COLOR_0` so that it is not applied twice.
 //!
 //! A primitive that assembles no triangle keeps its data and gets an all-zero `TEXCOORD_0`, so that
 //! `load_gltf` still finds UVs on every triangle primitive. Point and line primitives, and meshes no
@@ -162,7 +168,14 @@ fn malformed(path: &Path, message: impl Into<String>) -> AtlasError {
 /// for what is kept, rewritten and refused. `uv` is a per-corner layer of the mesh
 /// [`nuvo_geometry::gltf_io::load_gltf`] reads from `input` (`v` up). Returns where each output
 /// vertex came from. The output is written atomically.
-pub fn write_gltf_with_uvs(input: &Path, uv: &UvLayer, output: &Path) -> Result<GltfVertexMap, AtlasError> {
+///
+/// `base_colour_png`: PNG bytes of a base-colour texture baked through `uv` (module docs).
+pub fn write_gltf_with_uvs(
+    input: &Path,
+    uv: &UvLayer,
+    output: &Path,
+    base_colour_png: Option<&[u8]>,
+) -> Result<GltfVertexMap, AtlasError> {
     let scene = load_gltf_scene(input)?;
     check_document(input, &scene.document)?;
     check_uv(input, &scene.mesh, uv)?;
@@ -188,6 +201,9 @@ pub fn write_gltf_with_uvs(input: &Path, uv: &UvLayer, output: &Path) -> Result<
             faces: prim.faces.clone(),
             source_vertices,
         });
+    }
+    if let Some(png) = base_colour_png {
+        writer.use_base_colour(png, &scene.primitives);
     }
     let (json, bin) = writer.finish()?;
     let bytes = glb(output, &json, bin)?;
@@ -532,6 +548,85 @@ impl Writer<'_> {
             .into_iter()
             .collect(),
         )
+    }
+
+    /// Gives the rewritten primitives with triangles (`primitives`) the baked base colour `png`
+    /// (module docs): an embedded image, a texture, and per material used a copy showing it.
+    fn use_base_colour(&mut self, png: &[u8], primitives: &[GltfPrimitiveFaces]) {
+        let view = self.old_views + self.new_views.len();
+        self.new_views.push(([("byteLength", Value::from(png.len()))].into_iter().collect(), png.to_vec()));
+        fn push(json: &mut Value, key: &str, item: Value) -> usize {
+            let list = &mut json[key];
+            if !list.is_array() {
+                *list = Value::Array(Vec::new());
+            }
+            let list = list.as_array_mut().expect("made an array");
+            list.push(item);
+            list.len() - 1
+        }
+        let image = push(
+            &mut self.json,
+            "images",
+            [
+                ("bufferView", Value::from(view)),
+                ("mimeType", "image/png".into()),
+                ("name", "nuvo baked colour".into()),
+            ]
+            .into_iter()
+            .collect(),
+        );
+        // Linear, mip-mapped, clamped: the bake fills the gutters, so every level reads surface colour.
+        let sampler = push(
+            &mut self.json,
+            "samplers",
+            [("magFilter", 9729u64), ("minFilter", 9987), ("wrapS", 33071), ("wrapT", 33071)]
+                .into_iter()
+                .map(|(k, v)| (k, Value::from(v)))
+                .collect(),
+        );
+        let texture = push(
+            &mut self.json,
+            "textures",
+            [("sampler", sampler), ("source", image)].into_iter().map(|(k, v)| (k, Value::from(v))).collect(),
+        );
+        let mut copies: HashMap<Option<u64>, usize> = HashMap::new();
+        for prim in primitives.iter().filter(|p| !p.faces.is_empty()) {
+            let json_prim = &self.json["meshes"][prim.mesh]["primitives"][prim.primitive];
+            let original = json_prim.get("material").and_then(Value::as_u64);
+            let copy = match copies.get(&original) {
+                Some(&c) => c,
+                None => {
+                    let mut m = original
+                        .and_then(|m| self.json["materials"].get(m as usize))
+                        .filter(|m| m.is_object())
+                        .cloned()
+                        .unwrap_or_else(|| Value::Object(Default::default()));
+                    let name = m.get("name").and_then(Value::as_str).unwrap_or("material").to_owned();
+                    m["name"] = format!("{name} (nuvo)").into();
+                    let pbr = &mut m["pbrMetallicRoughness"];
+                    if !pbr.is_object() {
+                        *pbr = Value::Object(Default::default());
+                    }
+                    let alpha = pbr
+                        .get("baseColorFactor")
+                        .and_then(|f| f.get(3))
+                        .and_then(Value::as_f64)
+                        .unwrap_or(1.0);
+                    pbr["baseColorFactor"] = Value::from(vec![1.0, 1.0, 1.0, alpha]);
+                    pbr["baseColorTexture"] = [("index", Value::from(texture))].into_iter().collect();
+                    let c = push(&mut self.json, "materials", m);
+                    copies.insert(original, c);
+                    c
+                }
+            };
+            let out = &mut self.json["meshes"][prim.mesh]["primitives"][prim.primitive];
+            out["material"] = copy.into();
+            if let Some(attributes) = out.get_mut("attributes").and_then(Value::as_object_mut)
+                && let Some(colour) = attributes.remove("COLOR_0")
+            {
+                attributes.insert("_NUVO_BAKED_COLOR_0".into(), colour);
+            }
+        }
     }
 
     /// Rewrites one primitive (module docs) and returns, per output vertex, its input vertex.

@@ -425,7 +425,7 @@ fn write_and_check(glb_input: bool) {
     let out_dir = dir.path().join("out");
     std::fs::create_dir(&out_dir).unwrap();
     let output = out_dir.join("unwrapped.glb");
-    let map = write_gltf_with_uvs(&input, &uv, &output).unwrap();
+    let map = write_gltf_with_uvs(&input, &uv, &output, None).unwrap();
     let bytes = std::fs::read(&output).unwrap();
 
     // (a) Same faces, same corner positions, the given UVs.
@@ -604,11 +604,11 @@ fn rewriting_is_idempotent_on_its_own_output() {
     let input = write_input(dir.path(), "scene", true, false);
     let uv = seamed_layout(&load_gltf(&input).unwrap());
     let first = dir.path().join("first.glb");
-    write_gltf_with_uvs(&input, &uv, &first).unwrap();
+    write_gltf_with_uvs(&input, &uv, &first, None).unwrap();
     // The output's merged mesh has its own vertex numbering; give it the same per-corner UVs.
     let again = load_gltf(&first).unwrap().uv.unwrap();
     let second = dir.path().join("second.glb");
-    let map: GltfVertexMap = write_gltf_with_uvs(&first, &again, &second).unwrap();
+    let map: GltfVertexMap = write_gltf_with_uvs(&first, &again, &second, None).unwrap();
     assert_eq!(std::fs::read(&first).unwrap(), std::fs::read(&second).unwrap());
     for p in &map.primitives {
         assert!(p.source_vertices.iter().enumerate().all(|(i, &s)| i as u32 == s));
@@ -627,7 +627,7 @@ fn a_mesh_used_by_two_nodes_is_refused_naming_file_mesh_and_nodes() {
         }
         let mesh = load_gltf(&input).unwrap();
         let output = dir.path().join("out.glb");
-        let e2 = write_gltf_with_uvs(&input, &seamed_layout(&mesh), &output).unwrap_err().to_string();
+        let e2 = write_gltf_with_uvs(&input, &seamed_layout(&mesh), &output, None).unwrap_err().to_string();
         assert_eq!(e, e2);
         assert!(!output.exists());
     }
@@ -648,13 +648,13 @@ fn missing_corrupt_or_mismatched_inputs_are_errors_naming_the_file() {
         assert!(e.contains(path.to_str().unwrap()), "{e}");
     }
     for path in [&missing, &corrupt, &truncated] {
-        let e = write_gltf_with_uvs(path, &uv, &output).unwrap_err().to_string();
+        let e = write_gltf_with_uvs(path, &uv, &output, None).unwrap_err().to_string();
         assert!(e.contains(path.to_str().unwrap()), "{e}");
         assert!(!output.exists());
     }
     // A UV layer for another mesh.
     let good = write_input(dir.path(), "good", true, false);
-    let e = write_gltf_with_uvs(&good, &uv, &output).unwrap_err().to_string();
+    let e = write_gltf_with_uvs(&good, &uv, &output, None).unwrap_err().to_string();
     assert!(e.contains("good.glb") && e.contains("1 faces") && e.contains('8'), "{e}");
     assert!(!output.exists());
 }

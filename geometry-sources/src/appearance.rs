@@ -3,8 +3,8 @@
 //! textures through the input's own UVs (OBJ + MTL `map_Kd`, glTF `baseColorTexture`), and the
 //! colours of a point cloud's points (PLY `red green blue`, `.xyz` with nine columns).
 //!
-//! **Colours** are the file's encoded values (sRGB for images and, by convention, for vertex
-//! colours) scaled to `[0, 1]`; nothing here converts to linear light.
+//! **Colours** are sRGB-encoded values in `[0, 1]`: images' and OBJ/PLY/XYZ colours as stored
+//! (by convention sRGB), glTF's linear `COLOR_0` and `baseColorFactor` encoded as read.
 //!
 //! **Nothing lost.** An image that is missing, unreadable or in an unsupported encoding is a
 //! *warning* naming the file (the material then has no texture); only geometry that cannot be read
@@ -30,7 +30,8 @@
 //!   when the faces use them out of order), a glTF's merged primitives (vertices of primitives
 //!   without `COLOR_0` are white; without any `COLOR_0`, there are no vertex colours). OBJ colours
 //!   are `0..=255` when any value of the file exceeds 1, else `[0, 1]`. glTF's `COLOR_0` and
-//!   `baseColorFactor` are taken as stored (the glTF spec calls them linear; nothing converts).
+//!   `baseColorFactor` are linear light by the glTF spec and are encoded to sRGB as read, so
+//!   that every colour here (and the baked texture) is in one encoding.
 //! - **Textures** are sampled through the mesh's [`crate::UvLayer`], which is in OBJ's
 //!   convention (`v` up) for both formats (the glTF reader already stored `(u, 1 - v)`), so
 //!   [`ColourImage::sample`] serves both: bilinear, pixel centres at `((i + 0.5) / w,
@@ -403,4 +404,14 @@ fn barycentric(p: Vec3, t: [Vec3; 3]) -> [f32; 3] {
 /// The path an OBJ's `mtllib` (or a glTF's image URI) names, relative to the file's folder.
 fn relative_to(file: &Path, name: &str) -> PathBuf {
     file.parent().unwrap_or(Path::new(".")).join(name)
+}
+
+/// The sRGB encoding of a linear-light value in `[0, 1]` (IEC 61966-2-1).
+pub(crate) fn linear_to_srgb(x: f32) -> f32 {
+    match x {
+        x if x <= 0.003_130_8 => 12.92 * x,
+        // Exact at 1, so white stays white (the formula gives 1 − 6e-8 in f32).
+        x if x >= 1.0 => 1.0,
+        x => 1.055 * x.powf(1.0 / 2.4) - 0.055,
+    }
 }

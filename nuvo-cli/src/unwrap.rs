@@ -248,7 +248,15 @@ pub fn run_unwrap(args: &UnwrapArgs) -> anyhow::Result<()> {
         && let Some(uv) = &report.baked_uv
     {
         let scene = out.join("scene.glb");
-        let map = nuvo_atlas::gltf_scene::write_gltf_with_uvs(&input, uv, &scene)?;
+        // The baked appearance replaces the scene's own base colour, which followed the old UVs.
+        let texture = match report.metrics.as_ref().and_then(|m| m.texture.as_ref()) {
+            Some(_) => {
+                let p = out.join(nuvo_core::outputs::names::TEXTURE);
+                Some(std::fs::read(&p).with_context(|| format!("cannot read {}", p.display()))?)
+            }
+            None => None,
+        };
+        let map = nuvo_atlas::gltf_scene::write_gltf_with_uvs(&input, uv, &scene, texture.as_deref())?;
         let map_path = out.join("scene_vertex_map.json");
         let json = serde_json::to_string(&map).context("cannot encode the scene's vertex map")?;
         nuvo_fsio::write_bytes_atomic(&map_path, json.as_bytes())

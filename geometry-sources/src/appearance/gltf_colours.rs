@@ -51,7 +51,11 @@ pub(super) fn gltf_colours(path: &Path) -> Result<LoadedColours, GeometryError> 
         .enumerate()
         .map(|(i, m)| {
             let name = m.name.clone().unwrap_or_default();
-            let [r, g, b, _] = m.pbr_metallic_roughness.base_color_factor.0;
+            // The factor is linear light (glTF spec), our colours are sRGB-encoded values.
+            let [r, g, b] = {
+                let [r, g, b, _] = m.pbr_metallic_roughness.base_color_factor.0;
+                [r, g, b].map(super::linear_to_srgb)
+            };
             let texture = match (&m.pbr_metallic_roughness.base_color_texture, used[i]) {
                 (Some(info), true) => {
                     let what = format!("{file}: material {i} (`{name}`)");
@@ -120,7 +124,9 @@ fn read_colour_0(
     if colours.len() != vertices {
         return Err(format!("COLOR_0 has {} entries but there are {vertices} vertices", colours.len()));
     }
-    Ok(colours.into_iter().map(|c| c.map(|x| if x.is_finite() { x.clamp(0.0, 1.0) } else { 0.0 })).collect())
+    // COLOR_0 is linear light (glTF spec); our colours are sRGB-encoded values.
+    let encode = |x: f32| if x.is_finite() { super::linear_to_srgb(x.clamp(0.0, 1.0)) } else { 0.0 };
+    Ok(colours.into_iter().map(|c| c.map(encode)).collect())
 }
 
 /// Decoded images by index (`None`: could not be used, already warned about).

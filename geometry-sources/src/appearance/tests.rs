@@ -354,13 +354,13 @@ fn gltf_color_0_becomes_vertex_colours() {
     assert_eq!(s.mesh, crate::load_mesh(&p).unwrap());
     let vc = s.vertex_colours.as_ref().unwrap();
     let want =
-        [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.2; 3]];
+        [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [SRGB_0_2; 3]];
     assert_eq!(vc.len(), 6);
     for (got, want) in vc.iter().zip(want) {
         assert_close(*got, want, 1e-6);
     }
     assert_close(s.colour(0, [0.5, 0.5, 0.0]), [0.5, 0.5, 0.0], 1e-6);
-    assert_close(s.colour(1, [0.0, 0.0, 1.0]), [0.2; 3], 1e-6);
+    assert_close(s.colour(1, [0.0, 0.0, 1.0]), [SRGB_0_2; 3], 1e-6);
 
     // A primitive without COLOR_0 is white.
     let p = write(dir.path(), "half.gltf", gltf_with_colours(false));
@@ -369,6 +369,11 @@ fn gltf_color_0_becomes_vertex_colours() {
     assert_eq!(&vc[3..], &[[1.0; 3]; 3]);
     assert_close(vc[1], [0.0, 1.0, 0.0], 0.0);
 }
+
+/// Linear 0.2 and 0.5 in sRGB encoding (IEC 61966-2-1: 1.055 x^(1/2.4) − 0.055), as glTF's
+/// linear `COLOR_0` and `baseColorFactor` are read.
+const SRGB_0_2: f32 = 0.484_529_2;
+const SRGB_0_5: f32 = 0.735_357;
 
 /// A triangle with TEXCOORD_0 whose material has `baseColorFactor` and the texture `image` (a JSON
 /// object), with `extra` appended to the buffer (for a GLB's image) and `tex_coord`.
@@ -425,12 +430,12 @@ fn gltf_embedded_texture_is_sampled_in_the_obj_convention() {
     assert_eq!(s.mesh, crate::load_mesh(&p).unwrap());
     assert_eq!(s.vertex_colours, None);
     assert_eq!(s.materials[0].name, "painted");
-    assert_eq!(s.materials[0].base_colour, [1.0, 0.5, 1.0]);
+    assert_close(s.materials[0].base_colour, [1.0, SRGB_0_5, 1.0], 1e-6);
     // Corner 0: uv (0.75, 0.25) bottom-right (white); corner 1: (0.25, 0.75) top-left (red);
     // corner 2: (0.75, 0.75) top-right (green); times the factor.
-    assert_close(s.colour(0, [1.0, 0.0, 0.0]), [1.0, 0.5, 1.0], 1e-5);
+    assert_close(s.colour(0, [1.0, 0.0, 0.0]), [1.0, SRGB_0_5, 1.0], 1e-5);
     assert_close(s.colour(0, [0.0, 1.0, 0.0]), [1.0, 0.0, 0.0], 1e-5);
-    assert_close(s.colour(0, [0.0, 0.0, 1.0]), [0.0, 0.5, 0.0], 1e-5);
+    assert_close(s.colour(0, [0.0, 0.0, 1.0]), [0.0, SRGB_0_5, 0.0], 1e-5);
 
     // An external image next to the file, and a missing one (a warning naming it).
     two_by_two().save(dir.path().join("my tex.png")).unwrap();
