@@ -448,6 +448,39 @@ pub fn check_mesh(path: &Path, mesh: &TriMesh) -> Result<(), UnwrapError> {
 mod tests {
     use super::*;
 
+    #[test]
+    fn the_texture_is_baked_when_the_input_has_colour_and_a_mesh_to_bake_onto() {
+        let dir = tempfile::tempdir().unwrap();
+        let tri = "f 1 2 3\n";
+        let plain = dir.path().join("plain.obj");
+        std::fs::write(&plain, format!("v 0 0 0\nv 1 0 0\nv 0 1 0\n{tri}")).unwrap();
+        let (on, decision, warnings) = choose_texture(&plain, InputKind::Mesh, false).unwrap();
+        assert!(!on && decision.is_none() && warnings.is_empty());
+        let coloured = dir.path().join("coloured.obj");
+        std::fs::write(&coloured, format!("v 0 0 0 1 0 0\nv 1 0 0 0 1 0\nv 0 1 0 0 0 1\n{tri}")).unwrap();
+        let (on, decision, _) = choose_texture(&coloured, InputKind::Mesh, false).unwrap();
+        assert!(on);
+        assert!(decision.unwrap().why.contains("vertex colours"));
+        // A coloured point cloud has no mesh of its own: only with `output.bake_mesh`.
+        let cloud = dir.path().join("cloud.xyz");
+        std::fs::write(&cloud, "0 0 0 0 0 1 255 0 0\n1 0 0 0 0 1 0 255 0\n0 1 0 0 0 1 0 0 255\n").unwrap();
+        let (on, decision, _) = choose_texture(&cloud, InputKind::PointCloud, false).unwrap();
+        assert!(!on);
+        let d = decision.unwrap();
+        assert!(d.choice == "none" && d.why.contains("output.bake_mesh"), "{d:?}");
+        assert!(choose_texture(&cloud, InputKind::PointCloud, true).unwrap().0);
+        // A missing texture is a warning naming it, not an error, and no texture.
+        let mtl = dir.path().join("m.mtl");
+        std::fs::write(&mtl, "newmtl m\nmap_Kd gone.png\n").unwrap();
+        let textured = dir.path().join("textured.obj");
+        let text = format!(
+            "mtllib m.mtl\nusemtl m\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3\n"
+        );
+        std::fs::write(&textured, text).unwrap();
+        let (on, _, warnings) = choose_texture(&textured, InputKind::Mesh, false).unwrap();
+        assert!(!on && warnings.iter().any(|w| w.contains("gone.png")), "{warnings:?}");
+    }
+
     fn profile(hidden: f64, fragments: usize) -> MeshProfile {
         MeshProfile {
             vertices: 10,
