@@ -473,9 +473,8 @@ mod tests {
         let mtl = dir.path().join("m.mtl");
         std::fs::write(&mtl, "newmtl m\nmap_Kd gone.png\n").unwrap();
         let textured = dir.path().join("textured.obj");
-        let text = format!(
-            "mtllib m.mtl\nusemtl m\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3\n"
-        );
+        let text =
+            "mtllib m.mtl\nusemtl m\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3\n";
         std::fs::write(&textured, text).unwrap();
         let (on, _, warnings) = choose_texture(&textured, InputKind::Mesh, false).unwrap();
         assert!(!on && warnings.iter().any(|w| w.contains("gone.png")), "{warnings:?}");
