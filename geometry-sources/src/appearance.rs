@@ -74,12 +74,10 @@ use std::num::NonZero;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use glam::Vec3;
-use parry3d::query::PointQueryWithLocation;
-
 use crate::error::GeometryError;
 use crate::frame::Similarity;
 use crate::mesh::TriMesh;
+use crate::raycast::RayCaster;
 
 mod gltf_colours;
 mod image_io;
@@ -290,9 +288,8 @@ pub struct NearestColour {
 
 /// What [`NearestColour`] searches.
 enum NearestIndex {
-    /// The faces with positive area (`faces[i]` is the mesh face of parry's triangle `i`; `shape`
-    /// is `None` without any) and the colours to evaluate there.
-    Surface { shape: Option<Box<parry3d::shape::TriMesh>>, faces: Vec<u32>, colours: Box<SurfaceColours> },
+    /// The faces with positive area, in the query frame, and the colours to evaluate there.
+    Surface { caster: Box<RayCaster>, colours: Box<SurfaceColours> },
     /// The points with finite coordinates (`tree` is `None` without any) and their colours, in
     /// the tree's item order.
     Points { tree: Option<kiddo::ImmutableKdTree<f32, 3>>, colours: Vec<Rgb> },
@@ -310,19 +307,10 @@ impl NearestColour {
                 let mut mesh = surface.mesh.clone();
                 mesh.uv = None;
                 mesh.transform(to_frame);
-                let faces: Vec<u32> = (0..mesh.triangles.len())
-                    .filter(|&f| {
-                        let a = mesh.face_area(f);
-                        a > 0.0 && a.is_finite()
-                    })
-                    .map(|f| f as u32)
-                    .collect();
-                let vertices: Vec<parry3d::math::Vec3> =
-                    mesh.positions.iter().map(|p| parry3d::math::Vec3::from(*p)).collect();
-                let indices: Vec<[u32; 3]> = faces.iter().map(|&f| mesh.triangles[f as usize]).collect();
-                // `new` fails only on an empty index list (the indices are in range).
-                let shape = parry3d::shape::TriMesh::new(vertices, indices).ok().map(Box::new);
-                NearestIndex::Surface { shape, faces, colours: Box::new(surface.clone()) }
+                NearestIndex::Surface {
+                    caster: Box::new(RayCaster::build(&mesh)),
+                    colours: Box::new(surface.clone()),
+                }
             }
             Colours::Points(points) => {
                 let (positions, colours): (Vec<[f32; 3]>, Vec<Rgb>) = points
@@ -349,16 +337,10 @@ impl NearestColour {
             return [1.0; 3];
         }
         match &self.index {
-            NearestIndex::Surface { shape: Some(shape), faces, colours } => {
-                let q = parry3d::math::Vec3::from(p);
-                let (projection, (triangle, location)) = shape.project_local_point_and_get_location(q, false);
-                let Some(&face) = faces.get(triangle as usize) else { return [1.0; 3] };
-                let bary = location.barycentric_coordinates().unwrap_or_else(|| {
-                    let corners = shape.triangle(triangle);
-                    barycentric(projection.point, [corners.a, corners.b, corners.c].map(Vec3::from))
-                });
-                colours.colour(face as usize, bary)
-            }
+            NearestIndex::Surface { caster, colours } => match caster.nearest(p) {
+                Some((face, bary)) => colours.colour(face as usize, bary),
+                None => [1.0; 3],
+            },
             NearestIndex::Points { tree: Some(tree), colours } => {
                 let near =
                     tree.nearest_n::<kiddo::SquaredEuclidean>(&p, NonZero::new(POINT_NEIGHBOURS).unwrap());
@@ -384,21 +366,6 @@ impl NearestColour {
             _ => [1.0; 3],
         }
     }
-}
-
-/// Barycentric coordinates of `p` (on the triangle's plane) in triangle `t`; the first corner for
-/// a degenerate triangle.
-fn barycentric(p: Vec3, t: [Vec3; 3]) -> [f32; 3] {
-    let (e1, e2, d) = (t[1] - t[0], t[2] - t[0], p - t[0]);
-    let (d11, d12, d22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
-    let (d1, d2) = (d.dot(e1), d.dot(e2));
-    let det = d11 * d22 - d12 * d12;
-    if det <= 0.0 || !det.is_finite() {
-        return [1.0, 0.0, 0.0];
-    }
-    let v = (d22 * d1 - d12 * d2) / det;
-    let w = (d11 * d2 - d12 * d1) / det;
-    [1.0 - v - w, v, w]
 }
 
 /// The path an OBJ's `mtllib` (or a glTF's image URI) names, relative to the file's folder.

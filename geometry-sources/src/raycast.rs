@@ -1,4 +1,5 @@
-//! First-hit ray casting against a triangle mesh, on `parry3d`'s bounding-volume hierarchy.
+//! First-hit ray casting against a triangle mesh, and the nearest point of its surface to any point
+//! (`crate::appearance` looks colours up there), on `parry3d`'s bounding-volume hierarchy.
 //!
 //! Chosen by measurement on the 609k-triangle `unruly_vase.obj` (BENCHMARKS.md): parry3d's BVH built
 //! faster than the `bvh` crate's and our own binned-SAH BVH (since removed; see the history of
@@ -7,7 +8,7 @@
 //! nothing extra; the hierarchy sees a triangle soup, so non-manifold and disconnected input is fine.
 
 use parry3d::math::Vec3;
-use parry3d::query::{Ray, RayCast};
+use parry3d::query::{PointQueryWithLocation, Ray, RayCast};
 
 use crate::coords::V3;
 use crate::mesh::TriMesh;
@@ -60,6 +61,35 @@ impl RayCaster {
         let face = *self.faces.get(hit.subshape as usize)?;
         Some(Hit { t: hit.time_of_impact, face })
     }
+
+    /// The point of the surface nearest `p`: its face and its barycentrics there. `None` when the
+    /// hierarchy is empty or `p` is not finite.
+    pub fn nearest(&self, p: V3) -> Option<(u32, [f32; 3])> {
+        let shape = self.shape.as_ref().filter(|_| p.iter().all(|x| x.is_finite()))?;
+        let (projection, (triangle, location)) =
+            shape.project_local_point_and_get_location(Vec3::from(p), false);
+        let face = *self.faces.get(triangle as usize)?;
+        let bary = location.barycentric_coordinates().unwrap_or_else(|| {
+            let t = shape.triangle(triangle);
+            barycentric(projection.point, [t.a, t.b, t.c])
+        });
+        Some((face, bary))
+    }
+}
+
+/// Barycentric coordinates of `p` (on the triangle's plane) in triangle `t`; the first corner for
+/// a degenerate triangle.
+fn barycentric(p: Vec3, t: [Vec3; 3]) -> [f32; 3] {
+    let (e1, e2, d) = (t[1] - t[0], t[2] - t[0], p - t[0]);
+    let (d11, d12, d22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+    let (d1, d2) = (d.dot(e1), d.dot(e2));
+    let det = d11 * d22 - d12 * d12;
+    if det <= 0.0 || !det.is_finite() {
+        return [1.0, 0.0, 0.0];
+    }
+    let v = (d22 * d1 - d12 * d2) / det;
+    let w = (d11 * d2 - d12 * d1) / det;
+    [1.0 - v - w, v, w]
 }
 
 #[cfg(test)]
@@ -134,6 +164,29 @@ mod tests {
     }
 
     #[test]
+    fn the_nearest_point_is_on_the_nearest_face() {
+        let mesh = random_soup(500, 3);
+        let caster = RayCaster::build(&mesh);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
+        for _ in 0..300 {
+            let p: V3 = std::array::from_fn(|_| rng.random_range(-1.5..1.5));
+            let (face, bary) = caster.nearest(p).unwrap();
+            assert!(bary.iter().all(|&b| b > -1e-4) && (bary.iter().sum::<f32>() - 1.0).abs() < 1e-4);
+            let c = mesh.corners(face as usize);
+            let q = Vec3::from(std::array::from_fn(|k| (0..3).map(|i| bary[i] * c[i][k]).sum::<f32>()));
+            let got = q.distance(Vec3::from(p));
+            // No other face's corners or centre is nearer than the point found.
+            for f in 0..500 {
+                let c = mesh.corners(f).map(Vec3::from);
+                for x in [c[0], c[1], c[2], (c[0] + c[1] + c[2]) / 3.0] {
+                    assert!(x.distance(Vec3::from(p)) >= got - 1e-5, "face {f} is nearer than face {face}");
+                }
+            }
+        }
+        assert!(caster.nearest([f32::NAN, 0.0, 0.0]).is_none());
+    }
+
+    #[test]
     fn only_degenerate_triangles_hit_nothing() {
         let mesh = TriMesh {
             positions: vec![[0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]],
@@ -143,5 +196,6 @@ mod tests {
         let caster = RayCaster::build(&mesh);
         assert_eq!(caster.triangle_count(), 0);
         assert!(caster.intersect([0.5, 0.0, 1.0], [0.0, 0.0, -1.0], f32::MAX).is_none());
+        assert!(caster.nearest([0.5, 0.0, 1.0]).is_none());
     }
 }
