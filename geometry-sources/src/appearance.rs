@@ -229,9 +229,22 @@ pub fn load_colours(path: &Path) -> Result<LoadedColours, GeometryError> {
     match ext.as_str() {
         "obj" => obj_mtl::obj_colours(path),
         "gltf" | "glb" => gltf_colours::gltf_colours(path),
+        "ply" if crate::ply::declares_faces(path) => ply_mesh_colours(path),
         "ply" | "xyz" | "txt" | "pts" => point_colours(path, &ext),
         _ => Ok(LoadedColours { colours: None, warnings: Vec::new() }),
     }
+}
+
+/// The vertex colours of a PLY mesh (a PLY with faces).
+fn ply_mesh_colours(path: &Path) -> Result<LoadedColours, GeometryError> {
+    let (mesh, colours, warning) = crate::ply::read_ply_mesh_coloured(path)?;
+    let warnings = warning.map(|w| format!("{}: {w}", path.display())).into_iter().collect();
+    let face_material = vec![NO_MATERIAL; mesh.triangles.len()];
+    let vertex_colours = colours.map(|c| c.into_iter().map(|c| c.map(unit)).collect());
+    Ok(finish_surface(
+        SurfaceColours { mesh, vertex_colours, materials: Vec::new(), face_material },
+        warnings,
+    ))
 }
 
 /// The colours of a point file (`ext` is `ply`, or a plain-text extension).

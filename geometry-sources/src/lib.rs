@@ -12,8 +12,8 @@
 //!
 //! | source | input | sampling |
 //! |---|---|---|
-//! | `mesh` ([`mesh_source`]) | `.obj`, `.gltf`, `.glb` | area-uniform, or first hits of camera rays |
-//! | `point_cloud` ([`point_cloud`]) | `.ply`, `.xyz` | random stored points; normals estimated if absent |
+//! | `mesh` ([`mesh_source`]) | `.obj`, `.gltf`, `.glb`, `.ply` with faces | area-uniform, or first hits of camera rays |
+//! | `point_cloud` ([`point_cloud`]) | `.ply` (its vertices), `.xyz` | random stored points; normals estimated if absent |
 //! | `density` ([`density`]) | `.npy` 3-D grid | volume-rendering weights along camera rays; its mesh by marching cubes ([`isosurface`]) |
 
 #![warn(missing_docs)]

@@ -6,10 +6,11 @@ use crate::error::GeometryError;
 use crate::mesh::TriMesh;
 
 /// The mesh file extensions [`load_mesh`] understands (lower case).
-pub const MESH_EXTENSIONS: &[&str] = &["obj", "gltf", "glb"];
+pub const MESH_EXTENSIONS: &[&str] = &["obj", "gltf", "glb", "ply"];
 
-/// Reads a triangle mesh from `.obj`, `.gltf` or `.glb` (case-insensitive extension), with its UVs
-/// when the file has them for every face. The result is validated ([`TriMesh::validate`]) and has at
+/// Reads a triangle mesh from `.obj`, `.gltf`, `.glb` or `.ply` (case-insensitive extension), with
+/// its UVs when the file has them for every face (a PLY mesh has none; a PLY without faces is a
+/// point cloud, an error here). The result is validated ([`TriMesh::validate`]) and has at
 /// least one face; degenerate faces are kept (see [`TriMesh::has_area`]).
 pub fn load_mesh(path: &Path) -> Result<TriMesh, GeometryError> {
     GeometryError::require_file(path)?;
@@ -17,6 +18,7 @@ pub fn load_mesh(path: &Path) -> Result<TriMesh, GeometryError> {
     match ext.as_str() {
         "obj" => crate::obj::load_obj(path),
         "gltf" | "glb" => crate::gltf_io::load_gltf(path),
+        "ply" => crate::ply::read_ply_mesh(path),
         _ => Err(GeometryError::invalid(
             path,
             format!("unsupported mesh extension `.{ext}`; supported: {}", dotted(MESH_EXTENSIONS)),

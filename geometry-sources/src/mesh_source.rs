@@ -3,7 +3,7 @@
 //! ```toml
 //! [geometry]
 //! source = "mesh"
-//! path = "unruly_vase.obj"     # .obj, .gltf or .glb
+//! path = "unruly_vase.obj"     # .obj, .gltf, .glb or .ply (with faces)
 //! sampling = "visible"         # or "uniform" (default)
 //! normals = "face"             # or "vertex"
 //! flip_normals = false         # true for a mesh wound inside out
@@ -42,7 +42,8 @@ pub enum SamplingMode {
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct MeshOptions {
-    /// The mesh file: `.obj`, `.gltf` or `.glb`. Relative paths resolve against the config's folder.
+    /// The mesh file: `.obj`, `.gltf`, `.glb` or `.ply` (with faces). Relative paths resolve
+    /// against the config's folder.
     /// Required.
     pub path: PathBuf,
     /// `"uniform"` (default) or `"visible"`.

@@ -30,8 +30,9 @@ pub const SAFETY_STOP: f64 = 1.3;
 
 #[derive(clap::Args)]
 pub struct UnwrapArgs {
-    /// The geometry: a mesh (.obj, .gltf, .glb), a point cloud (.ply, .xyz, .txt, .pts) or a density
-    /// grid (.npy, with an optional NAME.json header giving `bounds_min`/`bounds_max`).
+    /// The geometry: a mesh (.obj, .gltf, .glb, or .ply with faces), a point cloud (.ply without
+    /// faces, .xyz, .txt, .pts) or a density grid (.npy, with an optional NAME.json header giving
+    /// `bounds_min`/`bounds_max`).
     input: PathBuf,
     /// Output folder (default: runs/unwrap/<input name>). Must not hold a run already.
     #[arg(short = 'o', long = "out")]
@@ -142,15 +143,7 @@ pub fn run_unwrap(args: &UnwrapArgs) -> anyhow::Result<()> {
             }
             (mesh, profile) = (Some(m), Some(p));
         }
-        InputKind::PointCloud => {
-            if nuvo_geometry::ply::declares_faces(&input) {
-                println!(
-                    "note: {} declares faces; nuvo unwrap reads a PLY's vertices as a point cloud and writes \
-                     per-point UVs (save the mesh as .obj or .glb to get a baked mesh)",
-                    input.display()
-                );
-            }
-        }
+        InputKind::PointCloud => {}
         InputKind::Density => {
             recipe_input.bounds = nuvo_geometry::density::header_bounds(&input)?;
             if let Some([lo, hi]) = recipe_input.bounds {

@@ -165,6 +165,33 @@ fn an_input_with_colour_gets_its_colour_baked_into_texture_png() {
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("unwrap.json")).unwrap()).unwrap();
     assert!(report["decisions"].as_array().unwrap().iter().any(|d| d["what"] == "texture"));
+    // The same coloured mesh as a PLY (faces: a mesh, not a point cloud; `red green blue` bytes).
+    let ply = dir.path().join("coloured.ply");
+    let mut text = format!(
+        "ply\nformat ascii 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\n\
+         property uchar red\nproperty uchar green\nproperty uchar blue\nelement face {}\n\
+         property list uchar int vertex_indices\nend_header\n",
+        v.len(),
+        f.len()
+    );
+    for l in &coloured {
+        let n = numbers(l);
+        let c: Vec<u8> = n[3..].iter().map(|x| (x * 255.0).round() as u8).collect();
+        text += &format!("{} {} {} {} {} {}\n", n[0], n[1], n[2], c[0], c[1], c[2]);
+    }
+    for l in &f {
+        let i: Vec<usize> = numbers(l).iter().map(|&x| x as usize - 1).collect();
+        text += &format!("3 {} {} {}\n", i[0], i[1], i[2]);
+    }
+    std::fs::write(&ply, text).unwrap();
+    let from_ply = dir.path().join("ply");
+    let o = unwrap(&ply, &from_ply, &["--charts", "2"]);
+    assert!(o.status.success());
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("source: mesh") && stdout.contains("texture: texture.png"), "{stdout}");
+    let obj = std::fs::read_to_string(from_ply.join("atlas.obj")).unwrap();
+    assert_eq!(obj.lines().filter(|l| l.starts_with("v ")).count(), v.len());
+    assert_eq!(obj.lines().filter(|l| l.starts_with("f ")).count(), f.len());
     // `--set output.texture=false` keeps the checkerboard.
     let off = dir.path().join("off");
     assert!(unwrap(&input, &off, &["--charts", "2", "--set", "output.texture=false"]).status.success());

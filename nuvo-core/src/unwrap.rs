@@ -35,9 +35,11 @@ pub use nuvo_geometry::profile::profile_mesh;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum InputKind {
-    /// A triangle mesh (`.obj`, `.gltf`, `.glb`): trained on samples, baked onto itself.
+    /// A triangle mesh (`.obj`, `.gltf`, `.glb`, a `.ply` with faces): trained on samples, baked
+    /// onto itself.
     Mesh,
-    /// Surface points (`.ply`, `.xyz`, `.txt`, `.pts`): per-point UVs, or a bake onto a given mesh.
+    /// Surface points (a `.ply` without faces, `.xyz`, `.txt`, `.pts`): per-point UVs, or a bake
+    /// onto a given mesh.
     PointCloud,
     /// A density grid (`.npy`): baked onto its own marching-cubes mesh.
     Density,
@@ -73,6 +75,8 @@ fn input_error(path: &Path, message: impl Into<String>) -> UnwrapError {
 /// The input extensions `nuvo unwrap` reads, by kind.
 pub const MESH_INPUTS: &[&str] = &["obj", "gltf", "glb"];
 pub const POINT_INPUTS: &[&str] = &["ply", "xyz", "txt", "pts"];
+/// A `.ply` whose header declares faces is a mesh; without faces, a point cloud.
+const PLY: &str = "ply";
 pub const DENSITY_INPUTS: &[&str] = &["npy"];
 
 /// The kind of `path`, from its extension, after checking that it is a readable, non-empty file.
@@ -89,7 +93,7 @@ pub fn input_kind(path: &Path) -> Result<InputKind, UnwrapError> {
     }
     let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).unwrap_or_default();
     let is = |list: &[&str]| list.contains(&ext.as_str());
-    if is(MESH_INPUTS) {
+    if is(MESH_INPUTS) || (ext == PLY && nuvo_geometry::ply::declares_faces(path)) {
         Ok(InputKind::Mesh)
     } else if is(POINT_INPUTS) {
         Ok(InputKind::PointCloud)
@@ -605,6 +609,14 @@ mod tests {
         assert_eq!(input_kind(&write("a.OBJ", "v 0 0 0")).unwrap(), InputKind::Mesh);
         assert_eq!(input_kind(&write("a.glb", "x")).unwrap(), InputKind::Mesh);
         assert_eq!(input_kind(&write("a.xyz", "0 0 0")).unwrap(), InputKind::PointCloud);
+        let header =
+            "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n";
+        assert_eq!(
+            input_kind(&write("p.ply", &format!("{header}end_header\n"))).unwrap(),
+            InputKind::PointCloud
+        );
+        let mesh = format!("{header}element face 1\nproperty list uchar int vertex_indices\nend_header\n");
+        assert_eq!(input_kind(&write("m.ply", &mesh)).unwrap(), InputKind::Mesh);
         assert_eq!(input_kind(&write("a.npy", "x")).unwrap(), InputKind::Density);
         let e = input_kind(&write("a.stl", "solid")).unwrap_err().to_string();
         assert!(e.contains("a.stl") && e.contains("unsupported input type `.stl`"), "{e}");

@@ -637,3 +637,25 @@ fn nearest_point_colour_is_exact_on_a_point_and_weighted_between() {
         [1.0; 3]
     );
 }
+
+#[test]
+fn a_ply_mesh_has_surface_colours_and_a_ply_without_faces_point_colours() {
+    let dir = tempfile::tempdir().unwrap();
+    let header = |faces: usize| {
+        format!(
+            "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n\
+             property uchar red\nproperty uchar green\nproperty uchar blue\nelement face {faces}\n\
+             property list uchar int vertex_indices\nend_header\n0 0 0 255 0 0\n1 0 0 0 255 0\n0 1 0 0 0 255\n"
+        )
+    };
+    let mesh = write(dir.path(), "mesh.ply", format!("{}3 0 1 2\n", header(1)));
+    let loaded = load_colours(&mesh).unwrap();
+    let s = surface(&loaded);
+    assert_eq!(s.mesh, crate::load_mesh(&mesh).unwrap());
+    assert_close(s.colour(0, [0.5, 0.5, 0.0]), [0.5, 0.5, 0.0], 1e-6);
+    let cloud = write(dir.path(), "cloud.ply", header(0));
+    match load_colours(&cloud).unwrap().colours {
+        Some(Colours::Points(p)) => assert_eq!(p.colours[2], [0.0, 0.0, 1.0]),
+        other => panic!("{other:?}"),
+    }
+}
