@@ -65,6 +65,11 @@ impl Target {
                   property float nx\nproperty float ny\nproperty float nz\nend_header\n0 0 0 0 0 1\n1 0 0 0 0 1\n0 1 0 0 0 1\n"
                     .to_vec(),
                 ply_binary_seed(),
+                b"ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n\
+                  property uchar red\nproperty uchar green\nproperty uchar blue\nelement face 1\n\
+                  property list uchar int vertex_indices\nend_header\n0 0 0 255 0 0\n1 0 0 0 255 0\n\
+                  1 1 0 0 0 255\n0 1 0 9 9 9\n4 0 1 2 3\n"
+                    .to_vec(),
             ],
             Target::Xyz => vec![b"0 0 0 0 0 1\n1 0 0 0 0 1\n0 1 0 0 0 1\n".to_vec(), b"# c\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n".to_vec()],
             Target::Config => vec![
@@ -87,7 +92,12 @@ impl Target {
         let outcome = catch_unwind(AssertUnwindSafe(|| match self {
             Target::Npy => nuvo_geometry::npy::parse_npy(bytes).is_ok(),
             Target::Obj | Target::Glb | Target::Gltf => nuvo_geometry::load_mesh(&path).is_ok(),
-            Target::Ply | Target::Xyz => nuvo_geometry::point_cloud::read_points(&path).is_ok(),
+            // A PLY is read both ways: as points, and as a mesh (a PLY with faces is one).
+            Target::Ply => {
+                let points = nuvo_geometry::point_cloud::read_points(&path).is_ok();
+                nuvo_geometry::load_mesh(&path).is_ok() || points
+            }
+            Target::Xyz => nuvo_geometry::point_cloud::read_points(&path).is_ok(),
             Target::Config => {
                 nuvo_core::config::from_str("fuzz.toml", &String::from_utf8_lossy(bytes)).is_ok()
             }
