@@ -8,7 +8,7 @@
 //! | `uv_layout.png` | the baked UV triangles coloured by chart, overlaps in red |
 //! | `checker.png` | the checkerboard texture the OBJ's material and the renders use (without `texture.png`) |
 //! | `texture.png` | with `output.texture`: the input's colour baked through the new UVs (`nuvo_atlas::texture`) |
-//! | `renders/view_{k}.png` | the mesh wearing the checkerboard from several views |
+//! | `renders/view_{k}.png` | the mesh wearing `texture.png` (else the checkerboard) from several views |
 //! | `normal_grids.png` | the learned normal grids `N_i`, packed like the atlas |
 //! | `metrics.json` | Boundary, Stretch, Conformal, Editability, the PartUV metric set, UV statistics and the bake report |
 //! | `vertex_map.json` | for each vertex of `atlas.glb`, the input vertex it copies (seams split vertices) |
@@ -377,9 +377,12 @@ fn bake_and_measure(
     let checker = checkerboard(opts.atlas_resolution.min(2048), 8 * layout.columns)?;
     write_png(&path(names::CHECKER), &checker)?;
     files.push(path(names::CHECKER));
-    if let Some((image, _)) = &texture {
-        write_png(&path(names::TEXTURE), image)?;
-        files.push(path(names::TEXTURE));
+    // Encoded once: the file and the GLB's embedded image are the same bytes.
+    let texture_png = texture.as_ref().map(|(image, _)| png_bytes(image)).transpose()?;
+    if let Some(bytes) = &texture_png {
+        let p = path(names::TEXTURE);
+        nuvo_fsio::write_bytes_atomic(&p, bytes).map_err(io_err(&p))?;
+        files.push(p);
     }
     let (texture_image, texture_name) = match &texture {
         Some((image, _)) => (image, names::TEXTURE),
@@ -396,7 +399,10 @@ fn bake_and_measure(
     write_obj(&path(names::OBJ), &export, &export_frame, Some(Path::new(texture_name)))?;
     files.push(path(names::OBJ));
     files.push(path(names::OBJ).with_extension("mtl"));
-    let png = png_bytes(texture_image)?;
+    let png = match texture_png {
+        Some(bytes) => bytes,
+        None => png_bytes(&checker)?,
+    };
     write_glb(
         &path(names::GLB),
         &export,
