@@ -1,7 +1,7 @@
 //! Reading meshes for evaluation: the one place that decides which reader handles which file.
 //!
-//! The readers live in `nuvo-geometry` (OBJ, glTF and GLB with `TEXCOORD_0`); this module adds the
-//! requirement that a mesh to be measured has texture coordinates.
+//! The readers live in `nuvo-geometry` (OBJ, glTF and GLB with `TEXCOORD_0`, PLY meshes without
+//! UVs); this module adds the requirement that a mesh to be measured has texture coordinates.
 
 use std::path::Path;
 
@@ -9,7 +9,7 @@ use nuvo_geometry::TriMesh;
 
 use crate::error::AtlasError;
 
-/// Reads the mesh at `path` (`.obj`, `.gltf`, `.glb`). Errors name the file: missing, unreadable,
+/// Reads the mesh at `path` (`.obj`, `.gltf`, `.glb`, `.ply` with faces). Errors name the file: missing, unreadable,
 /// malformed, or an unsupported extension.
 pub fn load_mesh(path: &Path) -> Result<TriMesh, AtlasError> {
     Ok(nuvo_geometry::load_mesh(path)?)

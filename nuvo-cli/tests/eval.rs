@@ -36,11 +36,17 @@ fn garbage_and_unknown_formats_fail_naming_the_file() {
     let o = nuvo(&["eval", garbage.to_str().unwrap()]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("garbage.obj"), "{}", stderr(&o));
-    let other = dir.path().join("mesh.ply");
-    std::fs::write(&other, "ply\n").unwrap();
+    let other = dir.path().join("mesh.stl");
+    std::fs::write(&other, "solid\n").unwrap();
     let o = nuvo(&["eval", other.to_str().unwrap()]);
     assert!(!o.status.success());
-    assert!(stderr(&o).contains("mesh.ply") && stderr(&o).contains("unsupported"), "{}", stderr(&o));
+    assert!(stderr(&o).contains("mesh.stl") && stderr(&o).contains("unsupported"), "{}", stderr(&o));
+    // A PLY is read as a mesh now; a broken one is named with what is wrong.
+    let ply = dir.path().join("mesh.ply");
+    std::fs::write(&ply, "ply\n").unwrap();
+    let o = nuvo(&["eval", ply.to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("mesh.ply") && stderr(&o).contains("PLY header"), "{}", stderr(&o));
 }
 
 #[test]
