@@ -75,38 +75,20 @@ pub(crate) fn data_uri_bytes(uri: &str) -> Option<Result<Vec<u8>, String>> {
     Some(base64_decode(data).ok_or_else(|| "the data URI is not valid base64".into()))
 }
 
-/// Decodes standard (or URL-safe) base64, ignoring whitespace; padding is optional.
+/// Decodes standard (or URL-safe) base64, ignoring whitespace; padding is optional and bits left
+/// over in the last symbol are dropped. The `base64` crate decodes (the one gltf decodes its own
+/// buffer URIs with); only whitespace and the URL-safe alphabet are mapped first.
 pub(crate) fn base64_decode(text: &str) -> Option<Vec<u8>> {
-    let mut out = Vec::with_capacity(text.len() / 4 * 3);
-    let (mut acc, mut bits) = (0u32, 0u32);
-    let mut padding = false;
-    for b in text.bytes() {
-        let v = match b {
-            b'A'..=b'Z' => b - b'A',
-            b'a'..=b'z' => b - b'a' + 26,
-            b'0'..=b'9' => b - b'0' + 52,
-            b'+' | b'-' => 62,
-            b'/' | b'_' => 63,
-            b'=' => {
-                padding = true;
-                continue;
-            }
-            b if b.is_ascii_whitespace() => continue,
-            _ => return None,
-        };
-        if padding {
-            return None; // data after padding
-        }
-        acc = (acc << 6) | u32::from(v);
-        bits += 6;
-        if bits >= 8 {
-            bits -= 8;
-            out.push((acc >> bits) as u8);
-            acc &= (1 << bits) - 1;
-        }
-    }
-    // Left-over bits (< 8) are padding; six left means a truncated quantum.
-    (bits < 6).then_some(out)
+    let standard: Vec<u8> = text
+        .bytes()
+        .filter(|b| !b.is_ascii_whitespace())
+        .map(|b| match b {
+            b'-' => b'+',
+            b'_' => b'/',
+            b => b,
+        })
+        .collect();
+    base64::decode_config(standard, base64::STANDARD.decode_allow_trailing_bits(true)).ok()
 }
 
 /// Undoes `%XX` escapes of a relative URI; `None` when an escape is malformed or the result is not
