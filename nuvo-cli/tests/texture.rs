@@ -9,7 +9,9 @@ use std::path::{Path, PathBuf};
 
 use common::{SMALLEST_MODEL, nuvo, run};
 use nuvo_atlas::pictures::{RgbImage, write_png};
+use nuvo_atlas::uvstats::uv_charts;
 use nuvo_geometry::appearance::{ColourImage, Colours, SurfaceColours, load_colours};
+use nuvo_geometry::sampling::uniform::AreaSampler;
 use nuvo_geometry::testdata::data_file;
 use rand::{Rng, SeedableRng};
 
@@ -74,34 +76,26 @@ struct RoundTrip {
 fn round_trip(input: &SurfaceColours, output: &SurfaceColours, n: usize, resolution: f64) -> RoundTrip {
     let mesh = &input.mesh;
     assert_eq!(mesh.triangles.len(), output.mesh.triangles.len());
-    let areas: Vec<f64> = (0..mesh.triangles.len()).map(|f| mesh.face_area(f) as f64).collect();
-    let total: f64 = areas.iter().sum();
-    let mut cumulative = Vec::with_capacity(areas.len());
-    let mut acc = 0.0;
-    for a in &areas {
-        acc += a / total;
-        cumulative.push(acc);
-    }
+    let sampler = AreaSampler::new(mesh).unwrap();
     let uv = output.mesh.uv.as_ref().expect("atlas.obj has UVs");
     let seam = seam_distance(&output.mesh, resolution);
-    let island = islands(&output.mesh);
-    let mut island_area = vec![0.0; mesh.triangles.len()];
-    for (f, a) in areas.iter().enumerate() {
-        island_area[island[f]] += a / total;
+    let (island, islands) = uv_charts(&output.mesh, uv);
+    let mut island_area = vec![0.0; islands];
+    for (f, &i) in island.iter().enumerate() {
+        island_area[i as usize] += mesh.face_area(f) as f64 / sampler.total_area();
     }
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
     let (mut all, mut near, mut inside) = ((0.0, 0usize), (0.0, 0usize), (0.0, 0usize));
     let mut small = (0.0, 0usize);
     for _ in 0..n {
-        let r: f64 = rng.random();
-        let f = cumulative.partition_point(|&c| c < r).min(areas.len() - 1);
+        let f = sampler.face(rng.random());
         let (a, b): (f32, f32) = (rng.random(), rng.random());
         let (a, b) = if a + b > 1.0 { (1.0 - a, 1.0 - b) } else { (a, b) };
         let bary = [1.0 - a - b, a, b];
         let (want, got) = (input.colour(f, bary), output.colour(f, bary));
         let se: f64 = (0..3).map(|k| (want[k] as f64 - got[k] as f64).powi(2)).sum::<f64>() / 3.0;
         all = (all.0 + se, all.1 + 1);
-        if island_area[island[f]] < 0.01 {
+        if island_area[island[f] as usize] < 0.01 {
             small = (small.0 + se, small.1 + 1);
         }
         // Texel-space distance of the point to its face's nearest island edge, where it has one.
@@ -122,32 +116,6 @@ fn round_trip(input: &SurfaceColours, output: &SurfaceColours, n: usize, resolut
         psnr_small_islands: psnr(small),
         small_islands: small.1 as f64 / n as f64,
     }
-}
-
-/// Per face, its UV island (faces sharing an edge of UV corners), as the island's smallest face.
-fn islands(mesh: &nuvo_geometry::TriMesh) -> Vec<usize> {
-    let uv = mesh.uv.as_ref().unwrap();
-    let mut parent: Vec<usize> = (0..uv.triangles.len()).collect();
-    fn root(parent: &mut [usize], mut i: usize) -> usize {
-        while parent[i] != i {
-            parent[i] = parent[parent[i]];
-            i = parent[i];
-        }
-        i
-    }
-    let mut first = std::collections::HashMap::new();
-    for (f, t) in uv.triangles.iter().enumerate() {
-        for k in 0..3 {
-            let e = (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]));
-            if let Some(&g) = first.get(&e) {
-                let (a, b) = (root(&mut parent, f), root(&mut parent, g));
-                parent[a.max(b)] = a.min(b);
-            } else {
-                first.insert(e, f);
-            }
-        }
-    }
-    (0..parent.len()).map(|f| root(&mut parent, f)).collect()
 }
 
 /// For a face and a texel-space point on it, the distance (texels) to the nearest edge of that
