@@ -223,7 +223,7 @@ pub fn bake_texture(
     let half_diagonal2 = 0.5;
     // Each band's accumulators become colours as soon as the band is done: the whole image is
     // held only as an `Option<[f32; 3]>` per texel (16 bytes; 2048²: 67 MB).
-    let (mut colours, kinds): (Vec<Option<[f32; 3]>>, Vec<u8>) = bins
+    let (mut colours, sources): (Vec<Option<[f32; 3]>>, Vec<TexelSource>) = bins
         .par_iter()
         .enumerate()
         .flat_map_iter(|(b, faces)| {
@@ -267,18 +267,21 @@ pub fn bake_texture(
             }
             band.into_iter().map(|t| {
                 if t.samples > 0 {
-                    (Some(t.sum.map(|c| c / t.samples as f32)), COVERED)
+                    (Some(t.sum.map(|c| c / t.samples as f32)), TexelSource::Covered)
                 } else {
-                    (t.edge.map(|(c, _)| c), if t.edge.is_some() { EDGE } else { EMPTY_TEXEL })
+                    (
+                        t.edge.map(|(c, _)| c),
+                        if t.edge.is_some() { TexelSource::Edge } else { TexelSource::Empty },
+                    )
                 }
             })
         })
         .unzip();
     let mut report =
         TextureReport { resolution: res, supersampling: s, degenerate_faces, ..Default::default() };
-    report.covered_texels = kinds.iter().filter(|&&k| k == COVERED).count();
-    report.edge_texels = kinds.iter().filter(|&&k| k == EDGE).count();
-    drop(kinds);
+    report.covered_texels = sources.iter().filter(|&&k| k == TexelSource::Covered).count();
+    report.edge_texels = sources.iter().filter(|&&k| k == TexelSource::Edge).count();
+    drop(sources);
     report.filled_texels = fill_from_neighbours(&mut colours, w);
     let to_byte = |c: f32| (c.clamp(0.0, 1.0) * 255.0).round() as u8;
     let raw: Vec<u8> = colours.iter().flat_map(|c| c.unwrap_or(EMPTY).map(to_byte)).collect();
@@ -286,10 +289,16 @@ pub fn bake_texture(
     Ok(BakedTexture { image, report })
 }
 
-/// What a texel's colour came from after the band pass.
-const COVERED: u8 = 0;
-const EDGE: u8 = 1;
-const EMPTY_TEXEL: u8 = 2;
+/// Where a texel's colour came from in the band pass (one byte a texel, for the report).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum TexelSource {
+    /// Sub-texel points inside faces.
+    Covered,
+    /// The closest point of a face that grazes it.
+    Edge,
+    /// Nothing yet: filled from its neighbours.
+    Empty,
+}
 
 /// The colour of an image no face covers at all (nothing to fill from).
 const EMPTY: [f32; 3] = [0.5, 0.5, 0.5];
