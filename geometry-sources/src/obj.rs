@@ -108,12 +108,12 @@ pub(crate) fn load_obj_full(path: &Path, appearance: bool) -> Result<ObjRead, Ge
     if mesh.triangles.is_empty() {
         return Err(GeometryError::invalid(path, "the mesh has no faces"));
     }
-    if let Some(numbered) = in_file_order(&text, &mesh) {
+    if let Some((numbered, colours)) = in_file_order(&text, &mesh, appearance) {
         mesh.positions = numbered.positions;
         mesh.triangles = numbered.triangles;
-        if appearance {
+        if let Some(colours) = colours {
             // The vertices are now the file's `v` lines, so their colours are too.
-            extra.vertex_colours = file_vertex_colours(&text);
+            extra.vertex_colours = colours;
         }
     }
     mesh.validate().map_err(|m| GeometryError::invalid(path, m))?;
@@ -147,22 +147,10 @@ fn load_mtl_checked(path: &Path) -> tobj::MTLLoadResult {
     tobj::load_mtl_buf(&mut text.as_bytes())
 }
 
-/// The colour of every `v` line of `text` in file order: `v x y z r g b` gives `Some([r, g, b])`
-/// (as written), any other `v` line `None`.
-fn file_vertex_colours(text: &str) -> Vec<Option<[f32; 3]>> {
-    text.lines()
-        .filter_map(|line| {
-            let mut words = line.split_whitespace();
-            (words.next() == Some("v")).then(|| {
-                let numbers: Vec<f32> = words.map_while(|w| w.parse().ok()).collect();
-                (numbers.len() == 6).then(|| [numbers[3], numbers[4], numbers[5]])
-            })
-        })
-        .collect()
-}
-
 /// The mesh's vertices in the file's own order (every `v` line, referenced or not) and its faces
-/// indexing them (no UVs), or `None` when the file's `text` does not match what `tobj` read.
+/// indexing them (no UVs), or `None` when the file's `text` does not match what `tobj` read. With
+/// `colours`, also each `v` line's colour from the same pass: `v x y z r g b` gives
+/// `Some([r, g, b])` (as written), any other `v` line `None`.
 ///
 /// `tobj` numbers the vertices of each object in the order the faces first use them, so a user's
 /// vertex `i` would not be ours; a tool that hands UVs back to the user's mesh must keep the file's
@@ -170,8 +158,11 @@ fn file_vertex_colours(text: &str) -> Vec<Option<[f32; 3]>> {
 /// `tobj`; this pass re-reads only the `v` and `f` lines, fan-triangulates polygons as `tobj` does,
 /// and is used only if every corner lands on the same position as `tobj`'s, so it can never
 /// change the geometry, only its numbering.
-fn in_file_order(text: &str, mesh: &TriMesh) -> Option<TriMesh> {
+type VertexColours = Vec<Option<[f32; 3]>>;
+
+fn in_file_order(text: &str, mesh: &TriMesh, colours: bool) -> Option<(TriMesh, Option<VertexColours>)> {
     let mut positions: Vec<[f32; 3]> = Vec::new();
+    let mut vertex_colours: VertexColours = Vec::new();
     let mut triangles: Vec<[u32; 3]> = Vec::with_capacity(mesh.triangles.len());
     for line in text.lines() {
         let mut words = line.split_whitespace();
@@ -182,6 +173,10 @@ fn in_file_order(text: &str, mesh: &TriMesh) -> Option<TriMesh> {
                     *x = words.next()?.parse().ok()?;
                 }
                 positions.push(c);
+                if colours {
+                    let rgb: Vec<f32> = words.map_while(|w| w.parse().ok()).collect();
+                    vertex_colours.push(<[f32; 3]>::try_from(rgb).ok());
+                }
             }
             Some("f") => {
                 let corners: Vec<u32> = words
@@ -204,7 +199,7 @@ fn in_file_order(text: &str, mesh: &TriMesh) -> Option<TriMesh> {
             .iter()
             .zip(&mesh.triangles)
             .all(|(a, b)| (0..3).all(|k| positions[a[k] as usize] == mesh.positions[b[k] as usize]));
-    same.then_some(TriMesh { positions, triangles, uv: None })
+    same.then(|| (TriMesh { positions, triangles, uv: None }, colours.then_some(vertex_colours)))
 }
 
 /// Counts `f` lines whose corners all carry a `vt` index, and those with some corner without one.
