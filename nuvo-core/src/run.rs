@@ -250,14 +250,24 @@ pub fn logged_seconds(log: &str) -> f64 {
     let values = log
         .lines()
         .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok()?.get("seconds")?.as_f64());
+    cumulative_seconds(values).last().copied().unwrap_or(0.0)
+}
+
+/// The training seconds since the run began at each of a log's `seconds` values, in order. Logs
+/// written before `seconds` counted across resumed sessions restarted at 0 in each session: a
+/// value below the one before it starts a new session, which adds the last session's end.
+pub fn cumulative_seconds(values: impl IntoIterator<Item = f64>) -> Vec<f64> {
     let (mut finished_sessions, mut last) = (0.0, 0.0);
-    for v in values {
-        if v < last {
-            finished_sessions += last;
-        }
-        last = v;
-    }
-    finished_sessions + last
+    values
+        .into_iter()
+        .map(|v| {
+            if v < last {
+                finished_sessions += last;
+            }
+            last = v;
+            finished_sessions + v
+        })
+        .collect()
 }
 
 fn write_log_line(log: &mut impl Write, o: &StepOutcome, seconds: f64) -> std::io::Result<()> {
@@ -293,5 +303,12 @@ mod tests {
         // An old log resumed twice: each session restarted at 0.
         assert_eq!(logged_seconds(&log(&[1.0, 2.0, 0.5, 1.5, 0.25])), 2.0 + 1.5 + 0.25);
         assert_eq!(logged_seconds("not json\n{\"step\":0}\n"), 0.0);
+    }
+
+    #[test]
+    fn cumulative_seconds_carries_each_old_session_over_the_next() {
+        assert_eq!(super::cumulative_seconds([1.0, 2.0, 0.5, 1.5, 0.25]), [1.0, 2.0, 2.5, 3.5, 3.75]);
+        assert_eq!(super::cumulative_seconds([0.5, 1.0, 1.0]), [0.5, 1.0, 1.0]);
+        assert!(super::cumulative_seconds([]).is_empty());
     }
 }
