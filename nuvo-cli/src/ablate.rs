@@ -33,6 +33,9 @@ pub struct AblateArgs {
     /// Reuse finished variants' metrics and continue interrupted ones from their checkpoints.
     #[arg(long)]
     resume: bool,
+    /// Write no `report.html` (`nuvo report`) of the sweep.
+    #[arg(long)]
+    no_report: bool,
     /// Print the planned variants and exit.
     #[arg(long)]
     dry_run: bool,
@@ -86,6 +89,12 @@ pub fn run(args: &AblateArgs) -> anyhow::Result<()> {
     }
     println!("\n{}", ablation::markdown_table(&rows));
     println!("wrote {} and {}", out.join("ablation.md").display(), out.join("ablation.csv").display());
+    if !args.no_report {
+        // Every planned variant that has a folder, also those an earlier `--only` ran, in plan order.
+        let all: Vec<(String, PathBuf)> =
+            ablation::plan(&base).into_iter().map(|v| (v.name, out.join(v.dir_name))).collect();
+        crate::report::write_for_sweep(&out, &all)?;
+    }
     let failed = rows.iter().filter(|r| r.result.is_err()).count();
     if failed > 0 {
         anyhow::bail!("{failed} of {} variants failed (see the table for why)", rows.len());

@@ -5,6 +5,7 @@ mod bench;
 mod demo;
 mod eval;
 mod losses;
+mod report;
 mod train;
 mod unwrap;
 
@@ -30,6 +31,9 @@ enum Command {
     Ablate(ablate::AblateArgs),
     /// Bake, export, draw and measure the atlas of a run folder or checkpoint.
     Bake(train::BakeArgs),
+    /// Write one self-contained HTML page of runs or sweeps: metrics, loss curves, pictures, config
+    /// differences and a 3-D view of each atlas.
+    Report(report::ReportArgs),
     /// Measure a mesh's UVs: the paper's Boundary/Stretch/Conformal/Editability and UV statistics.
     Eval(eval::EvalArgs),
     /// Fit a small MLP to a known function with the autodiff engine and report the error.
@@ -46,6 +50,7 @@ fn main() -> ExitCode {
         Command::Train(args) => train::train(&args),
         Command::Ablate(args) => ablate::run(&args),
         Command::Bake(args) => train::bake(&args),
+        Command::Report(args) => report::run(&args),
         Command::Eval(args) => eval::run(&args),
         Command::Demo(args) => demo::run(&args),
         Command::Bench(args) => bench::run(&args),

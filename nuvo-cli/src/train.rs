@@ -28,6 +28,9 @@ pub struct TrainArgs {
     /// Stop after training: no baking, exports, pictures or metrics.
     #[arg(long)]
     no_bake: bool,
+    /// Write no `report.html` (`nuvo report`) into the run folder.
+    #[arg(long)]
+    no_report: bool,
 }
 
 #[derive(clap::Args)]
@@ -46,6 +49,9 @@ pub struct BakeArgs {
     /// e.g. a high-resolution scan); sets `output.texture` and `output.texture_from`.
     #[arg(long, value_name = "FILE")]
     texture_from: Option<PathBuf>,
+    /// Write no `report.html` (`nuvo report`) into the output folder.
+    #[arg(long)]
+    no_report: bool,
 }
 
 pub fn train(args: &TrainArgs) -> anyhow::Result<()> {
@@ -75,12 +81,14 @@ pub fn train(args: &TrainArgs) -> anyhow::Result<()> {
         },
         out_dir.display()
     );
-    if args.no_bake || !loaded.config.output.bake {
-        return Ok(());
+    if !args.no_bake && loaded.config.output.bake {
+        bake_into_report(&mut trainer.atlas(), Some(trainer.source()), &out_dir, &loaded)?;
+        if let Some(k) = crate::peak_rss_kib() {
+            println!("peak RSS {} MB over the whole run", k / 1024);
+        }
     }
-    bake_into_report(&mut trainer.atlas(), Some(trainer.source()), &out_dir, &loaded)?;
-    if let Some(k) = crate::peak_rss_kib() {
-        println!("peak RSS {} MB over the whole run", k / 1024);
+    if !args.no_report {
+        crate::report::write_for_run(&out_dir);
     }
     Ok(())
 }
@@ -116,7 +124,12 @@ pub fn bake(args: &BakeArgs) -> anyhow::Result<()> {
     };
     let out =
         args.out.clone().unwrap_or_else(|| ckpt_path.parent().map(Path::to_path_buf).unwrap_or_default());
-    bake_into_report(&mut atlas, scene.as_deref(), &out, &loaded).map(drop)
+    bake_into_report(&mut atlas, scene.as_deref(), &out, &loaded)?;
+    // A report of the folder's old outputs would now be stale.
+    if !args.no_report {
+        crate::report::write_for_run(&out);
+    }
+    Ok(())
 }
 
 /// A run's checkpoint (the run folder's, or the file itself), the config stored in it with

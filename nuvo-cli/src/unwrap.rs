@@ -50,6 +50,9 @@ pub struct UnwrapArgs {
     /// Override any value of the chosen config, e.g. `--set training.steps=2000` (repeatable).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     set: Vec<String>,
+    /// Write no `report.html` (`nuvo report`) into the output folder.
+    #[arg(long)]
+    no_report: bool,
     /// Print the decisions and the config, then stop without training.
     #[arg(long)]
     plan_only: bool,
@@ -276,6 +279,9 @@ pub fn run_unwrap(args: &UnwrapArgs) -> anyhow::Result<()> {
     let path = out.join("unwrap.json");
     nuvo_fsio::write_bytes_atomic(&path, json.as_bytes())
         .with_context(|| format!("cannot write {}", path.display()))?;
+    if !args.no_report {
+        crate::report::write_for_run(&out);
+    }
     println!(
         "done in {:.1} s (planning {:.1} s, training {:.1} s, bake and metrics {:.1} s); {} reproduces it with \
          `nuvo train {}`",

@@ -80,6 +80,15 @@ fn a_sweep_writes_the_table_and_reports_a_failed_variant_without_stopping() {
     assert!(std::fs::read_to_string(out.join("n-1/config.toml")).unwrap().contains("charts = 1"));
     assert!(out.join("base/atlas.obj").exists() && out.join("n-1/metrics.json").exists());
 
+    // The sweep's report shows every variant that ran, by its name, in the table's order.
+    let report = std::fs::read_to_string(out.join("report.html")).unwrap();
+    let columns: Vec<&str> =
+        report.split("<article class=\"run\"").skip(1).map(|a| a.split("</h3>").next().unwrap()).collect();
+    assert_eq!(columns.len(), 4, "the broken variant has no folder");
+    for (column, name) in columns.iter().zip(["base", "w/o texture", "w/o surface", "n=1"]) {
+        assert!(column.ends_with(name), "{column}");
+    }
+
     // --resume reuses the finished variants: the table is the same and nothing is retrained.
     let before = std::fs::metadata(out.join("base/checkpoint.safetensors")).unwrap().modified().unwrap();
     let o = run(nuvo()
