@@ -8,6 +8,7 @@ use std::time::Instant;
 use anyhow::Context;
 use nuvo_core::ablation::{self, Row, Variant, VariantError};
 use nuvo_core::config;
+use nuvo_core::manifest::{Shard, ShardSource};
 use nuvo_core::run::{files, logged_seconds};
 use nuvo_fsio::write_bytes_atomic;
 use nuvo_geometry::SourceRegistry;
@@ -36,6 +37,18 @@ pub struct AblateArgs {
     /// Write no `report.html` (`nuvo report`) of the sweep.
     #[arg(long)]
     no_report: bool,
+    /// Run only shard I of N of the planned variants (variant i when i mod N = I), resuming its
+    /// variants; default: from SLURM_ARRAY_TASK_ID/SLURM_ARRAY_TASK_COUNT, or JOB_COMPLETION_INDEX
+    /// with --shards. A sharded run writes no table: `--collect` assembles it once all are done.
+    #[arg(long, value_name = "I/N", conflicts_with = "shards")]
+    shard: Option<String>,
+    /// The number of shards of a Kubernetes indexed job (its `completions`).
+    #[arg(long, value_name = "N")]
+    shards: Option<usize>,
+    /// Train nothing: assemble the table and report from the variants' folders (after a sharded
+    /// sweep); a variant without metrics is a row saying so.
+    #[arg(long, conflicts_with_all = ["shard", "shards", "resume", "dry_run"])]
+    collect: bool,
     /// Print the planned variants and exit.
     #[arg(long)]
     dry_run: bool,
@@ -46,7 +59,26 @@ pub fn run(args: &AblateArgs) -> anyhow::Result<()> {
     let sources = SourceRegistry::with_builtins();
     let base = config::load(&args.config, &args.set)?;
     let out = args.out.clone().unwrap_or_else(|| base.config.output.dir.clone());
-    let variants = selected(ablation::plan(&base), &args.only)?;
+    let (shard, source) = if args.collect {
+        (Shard::WHOLE, ShardSource::Whole)
+    } else {
+        Shard::resolve(args.shard.as_deref(), args.shards, |k| std::env::var(k).ok())?
+    };
+    let planned: Vec<Variant> = ablation::plan(&base)
+        .into_iter()
+        .enumerate()
+        .filter(|(i, _)| shard.owns(*i))
+        .map(|(_, v)| v)
+        .collect();
+    let variants = selected(planned, &args.only)?;
+    if args.collect {
+        return collect(args, &base, &out, &variants);
+    }
+    let sharded = source != ShardSource::Whole;
+    if sharded {
+        let names: Vec<&str> = variants.iter().map(|v| v.name.as_str()).collect();
+        println!("shard {shard}: {} variant(s): {}", variants.len(), names.join(", "));
+    }
     if args.dry_run {
         for v in &variants {
             println!(
@@ -64,7 +96,7 @@ pub fn run(args: &AblateArgs) -> anyhow::Result<()> {
     for (k, v) in variants.iter().enumerate() {
         println!("[{}/{}] {} -> {}", k + 1, variants.len(), v.name, out.join(&v.dir_name).display());
         let started = Instant::now();
-        let result = run_one(args, v, &out, (&sources, &losses));
+        let result = run_one(args, sharded, v, &out, (&sources, &losses));
         let dir = out.join(&v.dir_name);
         let logged = std::fs::read_to_string(dir.join(files::LOG)).ok().map(|t| logged_seconds(&t));
         let seconds = logged.filter(|&s| s > 0.0).unwrap_or_else(|| started.elapsed().as_secs_f64());
@@ -85,7 +117,22 @@ pub fn run(args: &AblateArgs) -> anyhow::Result<()> {
             Err(e) => println!("[{}/{}] {}: FAILED: {e}", k + 1, variants.len(), v.name),
         }
         rows.push(row);
-        write_tables(&out, &rows)?;
+        if !sharded {
+            write_tables(&out, &rows)?;
+        }
+    }
+    if sharded {
+        let failed = rows.iter().filter(|r| r.result.is_err()).count();
+        println!(
+            "shard {shard} done ({failed} failed); once every shard is, `nuvo ablate {} --out {} --collect` writes the \
+             table and the report",
+            args.config.display(),
+            out.display()
+        );
+        if failed > 0 {
+            anyhow::bail!("{failed} of {} variants of shard {shard} failed", rows.len());
+        }
+        return Ok(());
     }
     println!("\n{}", ablation::markdown_table(&rows));
     println!("wrote {} and {}", out.join("ablation.md").display(), out.join("ablation.csv").display());
@@ -98,6 +145,49 @@ pub fn run(args: &AblateArgs) -> anyhow::Result<()> {
     let failed = rows.iter().filter(|r| r.result.is_err()).count();
     if failed > 0 {
         anyhow::bail!("{failed} of {} variants failed (see the table for why)", rows.len());
+    }
+    Ok(())
+}
+
+/// `--collect`: the table and report of the variants' folders as they are, training nothing.
+fn collect(
+    args: &AblateArgs,
+    base: &config::LoadedConfig,
+    out: &std::path::Path,
+    variants: &[Variant],
+) -> anyhow::Result<()> {
+    let rows: Vec<Row> = variants
+        .iter()
+        .map(|v| {
+            let dir = out.join(&v.dir_name);
+            let steps = ablation::load_variant(&args.config, &args.set, v).map(|l| l.config.training.steps);
+            let result = match (ablation::Scores::read(&dir.join("metrics.json")), steps) {
+                (Some(s), Ok(planned)) if s.steps >= planned => Ok(s),
+                (Some(s), Ok(planned)) => Err(format!("unfinished: {} of {planned} steps", s.steps)),
+                (_, Err(e)) => Err(crate::one_line(&anyhow::Error::new(e))),
+                (None, _) => Err(format!("not run yet (no metrics.json in {})", dir.display())),
+            };
+            let seconds = std::fs::read_to_string(dir.join(files::LOG)).map_or(0.0, |t| logged_seconds(&t));
+            Row { name: v.name.clone(), dir, result, seconds }
+        })
+        .collect();
+    std::fs::create_dir_all(out)?;
+    write_tables(out, &rows)?;
+    println!("{}", ablation::markdown_table(&rows));
+    println!("wrote {} and {}", out.join("ablation.md").display(), out.join("ablation.csv").display());
+    if !args.no_report {
+        let all: Vec<(String, PathBuf)> =
+            ablation::plan(base).into_iter().map(|v| (v.name, out.join(v.dir_name))).collect();
+        crate::report::write_for_sweep(out, &all)?;
+    }
+    let missing: Vec<&str> = rows.iter().filter(|r| r.result.is_err()).map(|r| r.name.as_str()).collect();
+    if !missing.is_empty() {
+        anyhow::bail!(
+            "{} of {} variants have no finished run: {}",
+            missing.len(),
+            rows.len(),
+            missing.join(", ")
+        );
     }
     Ok(())
 }
@@ -120,6 +210,7 @@ fn selected(variants: Vec<Variant>, only: &[String]) -> anyhow::Result<Vec<Varia
 /// Loads, trains, bakes and measures one variant; any failure, even a panic, becomes the row's error.
 fn run_one(
     args: &AblateArgs,
+    sharded: bool,
     v: &Variant,
     out: &std::path::Path,
     registries: (&SourceRegistry, &LossRegistry),
@@ -127,8 +218,13 @@ fn run_one(
     let attempt = || -> Result<ablation::Scores, VariantError> {
         let loaded = ablation::load_variant(&args.config, &args.set, v)?;
         let mut progress = Progress::new(loaded.config.training.steps);
-        let scores =
-            ablation::run_variant(&loaded, &out.join(&v.dir_name), args.resume, registries, &mut progress);
+        let scores = ablation::run_variant(
+            &loaded,
+            &out.join(&v.dir_name),
+            args.resume || sharded,
+            registries,
+            &mut progress,
+        );
         progress.finish();
         scores
     };

@@ -1,6 +1,7 @@
 //! The `nuvo` command line.
 
 mod ablate;
+mod batch;
 mod bench;
 mod demo;
 mod eval;
@@ -29,6 +30,9 @@ enum Command {
     Train(train::TrainArgs),
     /// Train the base config and its loss-ablation variants, then write the paper's ablation table.
     Ablate(ablate::AblateArgs),
+    /// Unwrap every item of a manifest (or this shard's part of it, on a Slurm array or a Kubernetes
+    /// indexed job), or summarise a batch folder.
+    Batch(batch::BatchArgs),
     /// Bake, export, draw and measure the atlas of a run folder or checkpoint.
     Bake(train::BakeArgs),
     /// Write one self-contained HTML page of runs or sweeps: metrics, loss curves, pictures, config
@@ -49,6 +53,7 @@ fn main() -> ExitCode {
         Command::Unwrap(args) => unwrap::run_unwrap(&args),
         Command::Train(args) => train::train(&args),
         Command::Ablate(args) => ablate::run(&args),
+        Command::Batch(args) => batch::run(&args),
         Command::Bake(args) => train::bake(&args),
         Command::Report(args) => report::run(&args),
         Command::Eval(args) => eval::run(&args),

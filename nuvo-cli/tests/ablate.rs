@@ -118,3 +118,49 @@ fn unknown_variant_names_list_the_planned_ones() {
         "{stderr}"
     );
 }
+
+#[test]
+fn a_sweep_spread_over_an_array_is_collected_into_one_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = sweep_config(dir.path());
+    let out = dir.path().join("sweep");
+    let ablate = |extra: &[&str], env: &[(&str, &str)]| {
+        let mut cmd = nuvo();
+        cmd.arg("ablate").arg(&cfg).arg("--out").arg(&out).args(extra);
+        for var in
+            ["SLURM_ARRAY_TASK_ID", "SLURM_ARRAY_TASK_COUNT", "SLURM_ARRAY_TASK_MIN", "JOB_COMPLETION_INDEX"]
+        {
+            cmd.env_remove(var);
+        }
+        run(cmd.envs(env.iter().copied()))
+    };
+    // Before any shard ran, --collect says what is missing.
+    let o = ablate(&["--collect"], &[]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("not run yet"));
+    std::fs::remove_file(out.join("ablation.csv")).unwrap();
+
+    // Plan: base, w/o texture, w/o surface, n=1, broken. Shard 0 of 2 (a Slurm array task) has
+    // base, w/o surface and broken; shard 1 (by flag) has w/o texture and n=1.
+    let o = ablate(&[], &[("SLURM_ARRAY_TASK_ID", "0"), ("SLURM_ARRAY_TASK_COUNT", "2")]);
+    assert_eq!(o.status.code(), Some(1), "its broken variant fails the shard");
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("shard 0/2: 3 variant(s): base, w/o surface, broken"), "{stdout}");
+    assert!(!out.join("ablation.csv").exists(), "a shard writes no table of its own");
+    let o = ablate(&["--shard", "1/2"], &[]);
+    assert!(o.status.success());
+    assert!(out.join("wo_texture/metrics.json").exists() && out.join("base/metrics.json").exists());
+
+    let o = ablate(&["--collect"], &[]);
+    assert_eq!(o.status.code(), Some(1), "the broken variant is still missing");
+    let csv = std::fs::read_to_string(out.join("ablation.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    let status: Vec<(&str, &str)> = rows.iter().map(|r| (r[0], r[10])).collect();
+    assert_eq!(
+        status,
+        [("base", "ok"), ("w/o texture", "ok"), ("w/o surface", "ok"), ("n=1", "ok"), ("broken", "failed")]
+    );
+    assert!(csv.lines().last().unwrap().contains("must be at least 1"), "{csv}");
+    let report = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert_eq!(report.matches("<article class=\"run\"").count(), 4);
+}

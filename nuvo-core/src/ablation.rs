@@ -308,7 +308,7 @@ pub fn csv_table(rows: &[Row]) -> String {
 }
 
 /// RFC 4180 quoting where needed.
-fn csv_field(s: &str) -> String {
+pub(crate) fn csv_field(s: &str) -> String {
     if s.contains([',', '"', '\n', '\r']) { format!("\"{}\"", s.replace('"', "\"\"")) } else { s.to_owned() }
 }
 

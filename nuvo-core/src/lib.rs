@@ -8,6 +8,8 @@
 //! - [`run`]: the output folder, checkpoints, log, resume, budget and NaN rollback;
 //! - [`checkpoint`]: the safetensors checkpoint format;
 //! - [`ablation`]: sweeps of config variants and the paper's ablation table;
+//! - [`manifest`] and [`batch_record`]: `nuvo batch`'s items and shards, and what each item leaves
+//!   behind (its record, the summary table);
 //! - [`warm_start`]: the optional projection prior that starts charts as fold-free projections.
 //!
 //! Geometry sources and losses come from registries ([`nuvo_geometry::SourceRegistry`],
@@ -15,8 +17,10 @@
 
 pub mod ablation;
 pub mod batch;
+pub mod batch_record;
 pub mod checkpoint;
 pub mod config;
+pub mod manifest;
 pub mod model;
 pub mod outputs;
 pub mod run;
