@@ -303,9 +303,12 @@ fn run_column(h: &mut String, k: usize, run: &Run, differing: &BTreeSet<String>)
         h.push_str("<div class=\"pictures\">\n");
         for p in &run.pictures {
             let wide = if p.name.starts_with("normal_grids") { " class=\"wide\"" } else { "" };
+            let scaled = p
+                .scaled_from
+                .map_or(String::new(), |(w, h)| format!(" (shown smaller; the file is {w}×{h})"));
             let _ = writeln!(
                 h,
-                "<figure{wide}><img class=\"picture\" alt=\"{n}\" src=\"data:image/png;base64,{}\"><figcaption>{n}</figcaption></figure>",
+                "<figure{wide}><img class=\"picture\" alt=\"{n}\" src=\"data:image/png;base64,{}\"><figcaption>{n}{scaled}</figcaption></figure>",
                 base64::encode(&p.png),
                 n = escape(&p.name)
             );

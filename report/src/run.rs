@@ -17,12 +17,39 @@ use crate::log::TrainingLog;
 /// `nuvo unwrap`'s record of its decisions, shown when a run has one.
 pub const UNWRAP_JSON: &str = "unwrap.json";
 
+/// The longest side a picture is shown at. Larger ones (a 2048² UV layout is 4–5 MB) are
+/// scaled down for the page, so that a sweep of ten runs stays a page a browser opens quickly;
+/// the caption says so, and the file itself is beside the report.
+pub const PICTURE_SIDE: u32 = 1024;
+
 /// A picture of a run, as PNG bytes.
 #[derive(Clone, Debug)]
 pub struct Picture {
     /// Its path inside the run folder, shown as its caption.
     pub name: String,
     pub png: Vec<u8>,
+    /// The file's own size when the page shows it scaled down to [`PICTURE_SIDE`].
+    pub scaled_from: Option<(u32, u32)>,
+}
+
+impl Picture {
+    /// `png` as the page shows it (module docs); a PNG that cannot be decoded is an error message.
+    fn new(name: String, png: Vec<u8>) -> Result<Picture, String> {
+        let (w, h) = image::ImageReader::with_format(std::io::Cursor::new(&png), image::ImageFormat::Png)
+            .into_dimensions()
+            .map_err(|e| e.to_string())?;
+        if w.max(h) <= PICTURE_SIDE {
+            return Ok(Picture { name, png, scaled_from: None });
+        }
+        let img =
+            image::load_from_memory_with_format(&png, image::ImageFormat::Png).map_err(|e| e.to_string())?;
+        let small = img.resize(PICTURE_SIDE, PICTURE_SIDE, image::imageops::FilterType::Triangle);
+        let mut out = Vec::new();
+        small
+            .write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::Png)
+            .map_err(|e| e.to_string())?;
+        Ok(Picture { name, png: out, scaled_from: Some((w, h)) })
+    }
 }
 
 /// What a run folder holds.
@@ -128,8 +155,10 @@ impl Run {
         for name in names_of_pictures {
             let path = dir.join(&name);
             match std::fs::read(&path) {
-                Ok(png) if png.starts_with(b"\x89PNG\r\n\x1a\n") => pictures.push(Picture { name, png }),
-                Ok(_) => warnings.push(format!("{}: not a PNG file; left out", path.display())),
+                Ok(png) => match Picture::new(name, png) {
+                    Ok(p) => pictures.push(p),
+                    Err(e) => warnings.push(format!("{}: not a PNG picture ({e}); left out", path.display())),
+                },
                 Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
                 Err(e) => warnings.push(format!("cannot read {}: {e}", path.display())),
             }
@@ -227,7 +256,10 @@ mod tests {
     #[test]
     fn broken_files_are_warnings_and_pictures_come_in_page_order() {
         let dir = tempfile::tempdir().unwrap();
-        let png = b"\x89PNG\r\n\x1a\nrest".to_vec();
+        let mut png = Vec::new();
+        image::RgbImage::new(4, 3)
+            .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+            .unwrap();
         std::fs::write(dir.path().join("metrics.json"), "{ not json").unwrap();
         std::fs::write(dir.path().join("atlas.glb"), "not a glb").unwrap();
         std::fs::create_dir(dir.path().join("renders")).unwrap();
@@ -242,6 +274,25 @@ mod tests {
         assert!(run.warnings.iter().any(|w| w.contains("metrics.json") && w.contains("not JSON")));
         assert!(run.warnings.iter().any(|w| w.contains("checker.png")));
         assert!(run.warnings.iter().any(|w| w.contains("atlas.glb")));
+    }
+
+    #[test]
+    fn large_pictures_are_shown_scaled_down_and_small_ones_as_they_are() {
+        let encode = |w, h| {
+            let mut png = Vec::new();
+            image::RgbImage::from_fn(w, h, |x, y| image::Rgb([x as u8, y as u8, 7]))
+                .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+                .unwrap();
+            png
+        };
+        let big = Picture::new("uv_layout.png".into(), encode(2048, 1536)).unwrap();
+        assert_eq!(big.scaled_from, Some((2048, 1536)));
+        let shown = image::load_from_memory(&big.png).unwrap();
+        assert_eq!((shown.width(), shown.height()), (1024, 768));
+        let small = encode(300, 200);
+        let same = Picture::new("a.png".into(), small.clone()).unwrap();
+        assert_eq!((same.png, same.scaled_from), (small, None));
+        assert!(Picture::new("x.png".into(), b"\x89PNG\r\n\x1a\ncut".to_vec()).is_err());
     }
 
     #[test]
