@@ -195,7 +195,15 @@ fn run_item(
 ) -> anyhow::Result<Record> {
     let dir = out.join(&item.name);
     if dir.exists() {
-        // Not done (or it would have been skipped): what an earlier, killed or failed run left.
+        // Not done (or it would have been skipped): what an earlier, killed or failed run left,
+        // which its log marks as the batch's own. Anything else there is the user's: left alone.
+        let empty = std::fs::read_dir(&dir).is_ok_and(|mut d| d.next().is_none());
+        if !empty && !dir.join(ITEM_LOG).is_file() {
+            anyhow::bail!(
+                "{} exists and is not a batch item's folder (it has no {ITEM_LOG}); not touching it",
+                dir.display()
+            );
+        }
         std::fs::remove_dir_all(&dir)
             .with_context(|| format!("cannot clear {} to redo it", dir.display()))?;
     }

@@ -232,6 +232,14 @@ fn bad_manifests_and_shards_are_refused_before_anything_runs() {
         assert!(String::from_utf8_lossy(&o.stderr).contains(says), "{}", String::from_utf8_lossy(&o.stderr));
     }
     assert!(!out.exists(), "nothing written");
+    // A folder of the user's where an item's would go is never cleared.
+    std::fs::create_dir_all(out.join("a")).unwrap();
+    std::fs::write(out.join("a").join("mine.txt"), "keep").unwrap();
+    let o = run(&mut batch(&manifest, &out, &[], &[]));
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("is not a batch item's folder"));
+    assert_eq!(std::fs::read_to_string(out.join("a").join("mine.txt")).unwrap(), "keep");
+    std::fs::remove_dir_all(&out).unwrap();
     let empty = dir.path().join("empty.txt");
     std::fs::write(&empty, "# nothing\n").unwrap();
     let o = run(&mut batch(&empty, &out, &[], &[]));
