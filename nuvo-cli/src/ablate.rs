@@ -49,6 +49,11 @@ pub struct AblateArgs {
     /// sweep); a variant without metrics is a row saying so.
     #[arg(long, conflicts_with_all = ["shard", "shards", "resume", "dry_run"])]
     collect: bool,
+    /// Variants trained at once on this machine, as K shards in child processes (threads split
+    /// between them; each shard's output in `OUT/ablate-shard-K.log`), then collected.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..),
+          conflicts_with_all = ["shard", "shards", "collect", "dry_run"])]
+    jobs: u16,
     /// Print the planned variants and exit.
     #[arg(long)]
     dry_run: bool,
@@ -64,14 +69,17 @@ pub fn run(args: &AblateArgs) -> anyhow::Result<()> {
     } else {
         Shard::resolve(args.shard.as_deref(), args.shards, |k| std::env::var(k).ok())?
     };
-    let planned: Vec<Variant> = ablation::plan(&base)
+    // `--only` names are checked against the whole plan, then the shard takes its part of them.
+    let variants: Vec<Variant> = selected(ablation::plan(&base), &args.only)?
         .into_iter()
-        .enumerate()
         .filter(|(i, _)| shard.owns(*i))
         .map(|(_, v)| v)
         .collect();
-    let variants = selected(planned, &args.only)?;
     if args.collect {
+        return collect(args, &base, &out, &variants);
+    }
+    if args.jobs > 1 && source == ShardSource::Whole {
+        run_shards_here(args, &out)?;
         return collect(args, &base, &out, &variants);
     }
     let sharded = source != ShardSource::Whole;
@@ -149,6 +157,43 @@ pub fn run(args: &AblateArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `--jobs K`: the sweep as K shards, each a child `nuvo ablate --shard k/K` with its share of the
+/// threads and its output in a log; returns once all have ended (their failures are the table's).
+fn run_shards_here(args: &AblateArgs, out: &std::path::Path) -> anyhow::Result<()> {
+    let jobs = usize::from(args.jobs);
+    let threads = crate::batch::threads_per_job(jobs);
+    let exe = std::env::current_exe().context("cannot find the nuvo binary to run shards with")?;
+    std::fs::create_dir_all(out)?;
+    let mut children = Vec::with_capacity(jobs);
+    for k in 0..jobs {
+        let log_path = out.join(format!("ablate-shard-{k}.log"));
+        let log = std::fs::File::create(&log_path)
+            .with_context(|| format!("cannot write {}", log_path.display()))?;
+        let mut cmd = std::process::Command::new(&exe);
+        cmd.arg("ablate").arg(&args.config).arg("--out").arg(out).arg("--shard").arg(format!("{k}/{jobs}"));
+        for s in &args.set {
+            cmd.arg("--set").arg(s);
+        }
+        for o in &args.only {
+            cmd.arg("--only").arg(o);
+        }
+        cmd.env("RAYON_NUM_THREADS", threads.to_string())
+            .stdin(std::process::Stdio::null())
+            .stdout(log.try_clone().context("cannot share the shard's log")?)
+            .stderr(log);
+        children.push((k, log_path, cmd.spawn().with_context(|| format!("cannot start {}", exe.display()))?));
+    }
+    println!(
+        "{jobs} shards running, {threads} thread(s) each; their output: {}",
+        out.join("ablate-shard-*.log").display()
+    );
+    for (k, log_path, mut child) in children {
+        let status = child.wait().context("cannot wait for a shard")?;
+        println!("shard {k}/{jobs} ended ({status}); its output: {}", log_path.display());
+    }
+    Ok(())
+}
+
 /// `--collect`: the table and report of the variants' folders as they are, training nothing.
 fn collect(
     args: &AblateArgs,
@@ -192,19 +237,17 @@ fn collect(
     Ok(())
 }
 
-/// The planned variants restricted to `only` (names or folder names); an unknown name lists the
-/// planned ones.
-fn selected(variants: Vec<Variant>, only: &[String]) -> anyhow::Result<Vec<Variant>> {
-    if only.is_empty() {
-        return Ok(variants);
-    }
+/// The planned variants restricted to `only` (names or folder names), each with its place in the
+/// plan (which shard owns it); an unknown name lists the planned ones.
+fn selected(variants: Vec<Variant>, only: &[String]) -> anyhow::Result<Vec<(usize, Variant)>> {
     for o in only {
         if !variants.iter().any(|v| &v.name == o || &v.dir_name == o) {
             let names: Vec<&str> = variants.iter().map(|v| v.dir_name.as_str()).collect();
             anyhow::bail!("--only {o}: no such variant; planned: {}", names.join(", "));
         }
     }
-    Ok(variants.into_iter().filter(|v| only.iter().any(|o| o == &v.name || o == &v.dir_name)).collect())
+    let wanted = |v: &Variant| only.is_empty() || only.iter().any(|o| o == &v.name || o == &v.dir_name);
+    Ok(variants.into_iter().enumerate().filter(|(_, v)| wanted(v)).collect())
 }
 
 /// Loads, trains, bakes and measures one variant; any failure, even a panic, becomes the row's error.

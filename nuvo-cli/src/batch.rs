@@ -91,7 +91,7 @@ pub fn run(args: &BatchArgs) -> anyhow::Result<()> {
         ShardSource::Whole => "the whole manifest",
     };
     let jobs = usize::from(args.jobs);
-    let threads = threads_per_item(jobs);
+    let threads = threads_per_job(jobs);
     println!(
         "shard {shard} (from {from}): {} of {} items, {} already done, {} to run, {jobs} at a time with {threads} \
          thread(s) each, on {}",
@@ -163,9 +163,9 @@ fn status_word(s: Status) -> &'static str {
     }
 }
 
-/// The threads each of `jobs` items gets: the machine's (or `RAYON_NUM_THREADS`, if set) split
-/// evenly, at least one.
-fn threads_per_item(jobs: usize) -> usize {
+/// The threads each of `jobs` processes at once gets (a batch's items, an ablation's shards): the
+/// machine's (or `RAYON_NUM_THREADS`, if set) split evenly, at least one.
+pub(crate) fn threads_per_job(jobs: usize) -> usize {
     let total = std::env::var("RAYON_NUM_THREADS")
         .ok()
         .and_then(|v| v.parse().ok())

@@ -164,3 +164,32 @@ fn a_sweep_spread_over_an_array_is_collected_into_one_table() {
     let report = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert_eq!(report.matches("<article class=\"run\"").count(), 4);
 }
+
+#[test]
+fn jobs_train_variants_at_once_as_shards_and_collect_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = sweep_config(dir.path());
+    let out = dir.path().join("sweep");
+    let o = run(nuvo().arg("ablate").arg(&cfg).arg("--out").arg(&out).args([
+        "--jobs",
+        "2",
+        "--only",
+        "base",
+        "--only",
+        "n=1",
+        "--only",
+        "w/o texture",
+    ]));
+    assert!(o.status.success());
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("2 shards running") && stdout.contains("shard 1/2 ended"), "{stdout}");
+    for k in 0..2 {
+        let log = std::fs::read_to_string(out.join(format!("ablate-shard-{k}.log"))).unwrap();
+        assert!(log.contains(&format!("shard {k}/2:")), "{log}");
+    }
+    let csv = std::fs::read_to_string(out.join("ablation.csv")).unwrap();
+    let rows: Vec<(&str, &str)> =
+        csv.lines().skip(1).map(|l| l.split(',').collect::<Vec<_>>()).map(|r| (r[0], r[10])).collect();
+    assert_eq!(rows, [("base", "ok"), ("w/o texture", "ok"), ("n=1", "ok")]);
+    assert!(out.join("report.html").is_file());
+}
