@@ -193,26 +193,50 @@ pub fn pack_islands(mesh: &TriMesh, opts: &IslandPacking) -> Result<PackedIsland
 /// [`SHAPES_UP_TO`] islands, by their shapes, in the orders [`pack_islands`] tries. One
 /// packing attempt instead of [`pack_islands`]' bisection on the scale: what a caller that
 /// asks "does this layout pack at least this tightly" needs ([`crate::necks`]). Errors as
-/// [`pack_islands`]'.
+/// [`pack_islands`]'. To ask about one mesh at several scales, prepare it once with
+/// [`ScaleTest::new`].
 pub fn packs_at_scale(mesh: &TriMesh, opts: &IslandPacking, scale: f64) -> Result<bool, AtlasError> {
-    let uv = require_uv(mesh)?;
-    let IslandPacking { resolution: res, gutter, rotate } = *opts;
-    check_options(opts)?;
-    let (island_of_face, n) = uv_charts(mesh, uv);
-    let layout = Layout::of(mesh, uv, &island_of_face, n, rotate);
-    // No packing fills more than the square, nor holds a cell longer than its side: answered
-    // without rasterising footprints at a scale far beyond any that could fit.
-    let area: f64 = layout.islands.iter().filter(|i| !i.degenerate).map(|i| i.area_3d).sum();
-    let sizes: Vec<[u32; 2]> =
-        layout.islands.iter().map(|i| i.cell(scale, res).map(|x| x.saturating_add(gutter))).collect();
-    if !(scale.is_finite() && area * scale * scale <= 1.0 && sizes.iter().flatten().all(|&x| x <= res)) {
-        return Ok(false);
+    Ok(ScaleTest::new(mesh, opts)?.packs_at(scale))
+}
+
+/// A mesh's islands made ready for [`packs_at_scale`]'s question at any number of scales.
+/// Why: the islands, their least-shear turns and the packing orders do not depend on the scale,
+/// and working them out (the turns above all) was a third of each of the necks pass's probes,
+/// which ask one mesh at up to a dozen scales. The answers are those of [`packs_at_scale`].
+pub struct ScaleTest {
+    layout: Layout,
+    orders: ShapeOrders,
+    opts: IslandPacking,
+}
+
+impl ScaleTest {
+    /// The islands of `mesh` for the atlas of `opts`. Errors as [`pack_islands`]'.
+    pub fn new(mesh: &TriMesh, opts: &IslandPacking) -> Result<Self, AtlasError> {
+        let uv = require_uv(mesh)?;
+        check_options(opts)?;
+        let (island_of_face, n) = uv_charts(mesh, uv);
+        let layout = Layout::of(mesh, uv, &island_of_face, n, opts.rotate);
+        let orders = ShapeOrders::of(&layout.islands);
+        Ok(ScaleTest { layout, orders, opts: *opts })
     }
-    if pack_rects(&sizes, res, rotate).is_some() {
-        return Ok(true);
+
+    /// Whether the islands fit at the common `scale` ([`packs_at_scale`]).
+    pub fn packs_at(&self, scale: f64) -> bool {
+        let IslandPacking { resolution: res, gutter, rotate } = self.opts;
+        let islands = &self.layout.islands;
+        // No packing fills more than the square, nor holds a cell longer than its side: answered
+        // without rasterising footprints at a scale far beyond any that could fit.
+        let area: f64 = islands.iter().filter(|i| !i.degenerate).map(|i| i.area_3d).sum();
+        let sizes: Vec<[u32; 2]> =
+            islands.iter().map(|i| i.cell(scale, res).map(|x| x.saturating_add(gutter))).collect();
+        if !(scale.is_finite() && area * scale * scale <= 1.0 && sizes.iter().flatten().all(|&x| x <= res)) {
+            return false;
+        }
+        if pack_rects(&sizes, res, rotate).is_some() {
+            return true;
+        }
+        islands.len() <= SHAPES_UP_TO && self.orders.pack(islands, scale, res, gutter, rotate).is_some()
     }
-    Ok(n <= SHAPES_UP_TO
-        && ShapeOrders::of(&layout.islands).pack(&layout.islands, scale, res, gutter, rotate).is_some())
 }
 
 /// The resolution and gutter are in range (errors name them).

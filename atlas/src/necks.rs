@@ -63,7 +63,8 @@ use crate::error::AtlasError;
 use crate::geom::to_dvec3;
 use crate::injective::shortest_paths;
 use crate::islands::{
-    IslandPacking, SHAPES_UP_TO, convex_hull, min_area_rotation, pack_islands, packs_at_scale, rotated,
+    IslandPacking, SHAPES_UP_TO, ScaleTest, convex_hull, min_area_rotation, pack_islands, packs_at_scale,
+    rotated,
 };
 use crate::partuv::face_areas_3d;
 use crate::refine::island_unknowns;
@@ -203,6 +204,7 @@ pub fn cut_necks(mesh: &TriMesh, opts: &NeckOptions) -> Result<Necked, AtlasErro
             continue;
         };
         // The cut usually packs tighter than it had to: find how much, to `PROBE_STEP`.
+        let probe = ScaleTest::new(&trial, &opts.packing)?;
         let (mut lo, mut step) = (rise, PROBE_STEP);
         let mut hi = None;
         while hi.is_none_or(|h: f64| h / lo > 1.0 + PROBE_STEP) && affordable(&report) {
@@ -211,7 +213,7 @@ pub fn cut_necks(mesh: &TriMesh, opts: &NeckOptions) -> Result<Necked, AtlasErro
                 Some(h) => (lo * h).sqrt(),
             };
             report.probes += 1;
-            if packs_at_scale(&trial, &opts.packing, scale * next.sqrt())? {
+            if probe.packs_at(scale * next.sqrt()) {
                 lo = next;
                 step *= 2.0;
             } else {
