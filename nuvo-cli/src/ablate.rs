@@ -167,8 +167,6 @@ fn run_shards_here(args: &AblateArgs, out: &std::path::Path) -> anyhow::Result<(
     let mut children = Vec::with_capacity(jobs);
     for k in 0..jobs {
         let log_path = out.join(format!("ablate-shard-{k}.log"));
-        let log = std::fs::File::create(&log_path)
-            .with_context(|| format!("cannot write {}", log_path.display()))?;
         let mut cmd = std::process::Command::new(&exe);
         cmd.arg("ablate").arg(&args.config).arg("--out").arg(out).arg("--shard").arg(format!("{k}/{jobs}"));
         for s in &args.set {
@@ -177,11 +175,8 @@ fn run_shards_here(args: &AblateArgs, out: &std::path::Path) -> anyhow::Result<(
         for o in &args.only {
             cmd.arg("--only").arg(o);
         }
-        cmd.env("RAYON_NUM_THREADS", threads.to_string())
-            .stdin(std::process::Stdio::null())
-            .stdout(log.try_clone().context("cannot share the shard's log")?)
-            .stderr(log);
-        children.push((k, log_path, cmd.spawn().with_context(|| format!("cannot start {}", exe.display()))?));
+        let child = crate::batch::spawn_logged(&mut cmd, &log_path, threads)?;
+        children.push((k, log_path, child));
     }
     println!(
         "{jobs} shards running, {threads} thread(s) each; their output: {}",

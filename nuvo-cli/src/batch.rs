@@ -174,6 +174,23 @@ pub(crate) fn threads_per_job(jobs: usize) -> usize {
     (total / jobs).max(1)
 }
 
+/// Starts `cmd` (this binary with a subcommand) with `threads` threads, no input, and its output
+/// and errors in a new file at `log_path`: how a batch starts its items and `nuvo ablate --jobs`
+/// its shards.
+pub(crate) fn spawn_logged(
+    cmd: &mut Command,
+    log_path: &Path,
+    threads: usize,
+) -> anyhow::Result<std::process::Child> {
+    let log =
+        std::fs::File::create(log_path).with_context(|| format!("cannot write {}", log_path.display()))?;
+    cmd.env("RAYON_NUM_THREADS", threads.to_string())
+        .stdin(Stdio::null())
+        .stdout(log.try_clone().with_context(|| format!("cannot share {}", log_path.display()))?)
+        .stderr(log);
+    cmd.spawn().with_context(|| format!("cannot start {}", cmd.get_program().to_string_lossy()))
+}
+
 /// This machine's name, for the records (which host ran an item, when many do).
 fn host() -> String {
     std::env::var("HOSTNAME")
@@ -209,8 +226,6 @@ fn run_item(
     }
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let log_path = dir.join(ITEM_LOG);
-    let log =
-        std::fs::File::create(&log_path).with_context(|| format!("cannot write {}", log_path.display()))?;
     let set: Vec<String> = args.set.iter().chain(&item.set).cloned().collect();
     let mut cmd = Command::new(exe);
     cmd.arg("unwrap").arg(&item.input).arg("-o").arg(&dir);
@@ -220,12 +235,8 @@ fn run_item(
     if !args.item_reports {
         cmd.arg("--no-report");
     }
-    cmd.env("RAYON_NUM_THREADS", threads.to_string())
-        .stdin(Stdio::null())
-        .stdout(log.try_clone().context("cannot share the item's log")?)
-        .stderr(log);
     let started = Instant::now();
-    let mut child = cmd.spawn().with_context(|| format!("cannot start {}", exe.display()))?;
+    let mut child = spawn_logged(&mut cmd, &log_path, threads)?;
     let status = loop {
         if let Some(status) = child.try_wait().context("cannot wait for the item")? {
             break Some(status);
