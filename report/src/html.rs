@@ -55,8 +55,9 @@ model-viewer { width: 100%; height: 380px; background: #f7f7f7; border-radius: 4
 .pictures { display: flex; flex-wrap: wrap; gap: 8px; margin-top: 8px; }
 figure { margin: 0; }
 figure img { max-width: 100%; width: 200px; image-rendering: auto; border: 1px solid #eee; }
-figure.wide img { width: 100%; }
-figcaption { font-size: 12px; color: #555; }
+figure.wide img { width: 100%; max-width: 520px; }
+figcaption { font-size: 12px; color: #555; max-width: 200px; }
+figure.wide figcaption { max-width: 520px; }
 pre { background: #f7f7f7; padding: 8px; overflow-x: auto; font-size: 12px; max-height: 480px; }
 pre mark { background: #ffe58a; }
 details { margin-top: 8px; }
