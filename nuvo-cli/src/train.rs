@@ -62,6 +62,9 @@ pub fn train(args: &TrainArgs) -> anyhow::Result<()> {
     let mut trainer = build_trainer(&loaded)?;
     let out_dir = loaded.config.output.dir.clone();
     let mut progress = Progress::new(trainer.total_steps());
+    if !args.no_report {
+        progress = progress.reporting_into(&out_dir);
+    }
     let opts = RunOptions { out_dir: out_dir.clone(), resume: args.resume };
     let summary = run(&mut trainer, &opts, &mut progress)?;
     progress.finish();
@@ -267,7 +270,16 @@ pub(crate) struct Progress {
     total: u64,
     every: u64,
     started: Instant,
+    /// The run folder whose `report.html` is refreshed at checkpoints, so that a long run can be
+    /// watched in a browser (`None`: no report), and when it last was.
+    report_dir: Option<PathBuf>,
+    reported: Option<Instant>,
 }
+
+/// The least time between two refreshes of a training run's report: at the first checkpoint, then
+/// at the first checkpoint after each such interval. A run that checkpoints every step (the
+/// kill-and-resume tests do) must not spend its time drawing curves.
+const REPORT_EVERY: std::time::Duration = std::time::Duration::from_secs(30);
 
 impl Progress {
     pub(crate) fn new(total: u64) -> Self {
@@ -277,7 +289,20 @@ impl Progress {
                 .expect("the template is valid")
                 .progress_chars("=> "),
         );
-        Progress { bar, total, every: (total / 20).max(1), started: Instant::now() }
+        Progress {
+            bar,
+            total,
+            every: (total / 20).max(1),
+            started: Instant::now(),
+            report_dir: None,
+            reported: None,
+        }
+    }
+
+    /// Also refresh `dir/report.html` at checkpoints ([`REPORT_EVERY`]).
+    pub(crate) fn reporting_into(mut self, dir: &Path) -> Self {
+        self.report_dir = Some(dir.to_path_buf());
+        self
     }
 
     pub(crate) fn finish(&self) {
@@ -317,6 +342,21 @@ impl Observer for Progress {
         self.bar.println(message);
         if self.bar.is_hidden() {
             eprintln!("{message}");
+        }
+    }
+
+    fn checkpointed(&mut self, _step: u64) {
+        if self.reported.is_some_and(|t| t.elapsed() < REPORT_EVERY) {
+            return;
+        }
+        self.reported = Some(Instant::now());
+        if let Some(dir) = &self.report_dir
+            && let Err(e) =
+                nuvo_report::write_report(std::slice::from_ref(dir), &dir.join(nuvo_report::REPORT_HTML))
+        {
+            // Once: a report that cannot be written now will not be written at the next checkpoint.
+            self.report_dir = None;
+            self.note(&format!("warning: the run's report is not refreshed during training: {e}"));
         }
     }
 }

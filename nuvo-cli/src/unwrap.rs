@@ -234,6 +234,9 @@ pub fn run_unwrap(args: &UnwrapArgs) -> anyhow::Result<()> {
 
     // 5. Train, bake, export, measure.
     let mut progress = Progress::new(trainer.total_steps());
+    if !args.no_report {
+        progress = progress.reporting_into(&out);
+    }
     let summary = run(&mut trainer, &RunOptions { out_dir: out.clone(), resume: false }, &mut progress)?;
     progress.finish();
     let why = if summary.settled { " (the atlas had settled)" } else { "" };

@@ -118,6 +118,37 @@ fn a_run_still_training_shows_its_curves_and_bad_folders_are_refused_by_name() {
     assert!(!dir.path().join("x.html").exists());
 }
 
+#[test]
+fn a_training_run_refreshes_its_report_at_checkpoints() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = tiny_config(dir.path(), 1_000_000, 5);
+    let out = dir.path().join("run");
+    let mut child = nuvo()
+        .arg("train")
+        .arg(&cfg)
+        .arg("--out")
+        .arg(&out)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let started = std::time::Instant::now();
+    let page_path = out.join("report.html");
+    while !page_path.exists() {
+        assert!(started.elapsed().as_secs() < 120, "no report.html after two minutes of training");
+        assert!(child.try_wait().unwrap().is_none(), "training ended early");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let page = std::fs::read_to_string(&page_path).unwrap();
+    let status = "no metrics yet (still training, or trained without a bake): step ";
+    let at = page.find(status).map(|i| &page[i + status.len()..]).expect("the status of a running run");
+    let step: u64 = at.split(' ').next().unwrap().parse().unwrap();
+    assert!(step >= 5 && at.contains(" of 1000000 logged"), "{}", &at[..40]);
+    assert!(page.contains("data-curve=\"total\""));
+}
+
 /// Where the browser test's npm package lives.
 fn browser_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/browser")

@@ -37,6 +37,9 @@ pub trait Observer {
     fn stepped(&mut self, _outcome: &StepOutcome, _trainer: &Trainer) {}
     /// Something worth telling the user (skipped steps, rollbacks, checkpoints).
     fn note(&mut self, _message: &str) {}
+    /// After a checkpoint of `step` steps is saved and the log is written up to it: a moment to
+    /// look at the run so far (the CLI refreshes the run's report).
+    fn checkpointed(&mut self, _step: u64) {}
 }
 
 /// An observer that ignores everything.
@@ -157,6 +160,8 @@ pub fn run(
         if trainer.step_index().is_multiple_of(every) && consecutive_bad == 0 {
             snapshot = trainer.checkpoint()?;
             snapshot.save(&ckpt_path)?;
+            log.flush().map_err(io_err(&log_path))?;
+            observer.checkpointed(trainer.step_index());
         }
     }
     log.flush().map_err(io_err(&log_path))?;
