@@ -126,7 +126,7 @@ pub fn run(args: &BatchArgs) -> anyhow::Result<()> {
                                 "[{k}/{}] {}: {} after {:.1} s: {why}",
                                 todo.len(),
                                 item.name,
-                                status_word(r.status),
+                                r.status.as_str(),
                                 r.seconds
                             );
                             failed.lock().unwrap_or_else(|e| e.into_inner()).push(item.name.clone());
@@ -153,14 +153,6 @@ pub fn run(args: &BatchArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
-}
-
-fn status_word(s: Status) -> &'static str {
-    match s {
-        Status::Done => "done",
-        Status::Failed => "failed",
-        Status::TimedOut => "timed out",
-    }
 }
 
 /// The threads each of `jobs` processes at once gets (a batch's items, an ablation's shards): the

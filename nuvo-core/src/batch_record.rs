@@ -38,6 +38,17 @@ pub enum Status {
     TimedOut,
 }
 
+impl Status {
+    /// The word `batch.json` and the summary use for it (the serde names above).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Status::Done => "done",
+            Status::Failed => "failed",
+            Status::TimedOut => "timed out",
+        }
+    }
+}
+
 /// `batch.json`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Record {
@@ -131,10 +142,7 @@ pub fn summarise(dir: &Path) -> Vec<Row> {
             let item_dir = dir.join(&item.name);
             let record = Record::read(&item_dir);
             let status = match &record {
-                Some(r) => serde_json::to_value(r.status)
-                    .ok()
-                    .and_then(|v| v.as_str().map(String::from))
-                    .unwrap_or_default(),
+                Some(r) => r.status.as_str().to_owned(),
                 None if item_dir.is_dir() => "running or killed".into(),
                 None => "not started".into(),
             };
@@ -270,6 +278,13 @@ mod tests {
         let csv = csv(&rows);
         assert_eq!(csv.lines().count(), 5);
         assert_eq!(csv.lines().nth(1).unwrap(), "done,done.obj,done,2.5,0.95,0.96,7,,0,,");
+    }
+
+    #[test]
+    fn a_status_reads_as_its_serde_name() {
+        for s in [Status::Done, Status::Failed, Status::TimedOut] {
+            assert_eq!(serde_json::to_value(s).unwrap(), s.as_str());
+        }
     }
 
     #[test]
