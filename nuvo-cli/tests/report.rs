@@ -66,6 +66,28 @@ fn a_runs_report_holds_its_metrics_curves_pictures_model_and_config() {
     assert!(page.contains("customElements.define(\"model-viewer\""), "the viewer is embedded");
     let metrics: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap();
+    // Every number the readers of finished runs look up is where they look.
+    {
+        use nuvo_core::outputs::metric_paths::*;
+        for p in [
+            BOUNDARY,
+            STRETCH,
+            CONFORMAL,
+            EDITABILITY,
+            UV_EFFICIENCY,
+            CHARTS,
+            SEAM_LENGTH,
+            ANGULAR,
+            AREA_WORST_CHART,
+            AREA_OVERALL,
+            PACKING,
+            FLIPPED_FACES,
+            OVERLAPPING_FACES,
+            STEPS,
+        ] {
+            assert!(metrics.pointer(p).is_some_and(serde_json::Value::is_number), "{p} in metrics.json");
+        }
+    }
     let editability = metrics["metrics"]["image"]["editability"].as_f64().unwrap();
     assert!(
         page.contains(&format!("data-value=\"{editability}\">{editability:.4}</td>")),

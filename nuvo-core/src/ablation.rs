@@ -176,15 +176,16 @@ impl Scores {
     /// Reads the numbers back from a finished run's `metrics.json` (for resuming a sweep); `None`
     /// when the file is missing or not a complete metrics file.
     pub fn read(path: &Path) -> Option<Self> {
+        use crate::outputs::metric_paths as at;
         let v: serde_json::Value = serde_json::from_slice(&std::fs::read(path).ok()?).ok()?;
-        let image = &v["metrics"]["image"];
+        let number = |pointer: &str| v.pointer(pointer)?.as_f64();
         Some(Scores {
-            boundary: image["boundary"].as_f64()?,
-            stretch: image["stretch"].as_f64()?,
-            conformal: image["conformal"].as_f64()?,
-            uv_efficiency: v["metrics"]["uv"]["utilisation"].as_f64()?,
-            editability: image["editability"].as_f64()?,
-            steps: v["steps"].as_u64()?,
+            boundary: number(at::BOUNDARY)?,
+            stretch: number(at::STRETCH)?,
+            conformal: number(at::CONFORMAL)?,
+            uv_efficiency: number(at::UV_EFFICIENCY)?,
+            editability: number(at::EDITABILITY)?,
+            steps: v.pointer(at::STEPS)?.as_u64()?,
         })
     }
 }

@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::ablation::csv_field;
 use crate::manifest::Item;
-use crate::outputs::names;
+use crate::outputs::{metric_paths, names};
 
 /// The record of an ended item, in its folder.
 pub const RECORD: &str = "batch.json";
@@ -126,12 +126,12 @@ pub struct Row {
 
 /// The metric columns of [`Row::metrics`]: header and JSON pointer into `metrics.json`.
 pub const METRIC_COLUMNS: [(&str, &str); 6] = [
-    ("editability", "/metrics/image/editability"),
-    ("angular", "/metrics/partuv/angular_score"),
-    ("charts", "/metrics/partuv/charts"),
-    ("packing", "/metrics/partuv/packing_efficiency"),
-    ("flipped_faces", "/metrics/uv/flipped_faces"),
-    ("overlapping_faces", "/metrics/uv/overlapping_faces"),
+    ("editability", metric_paths::EDITABILITY),
+    ("angular", metric_paths::ANGULAR),
+    ("charts", metric_paths::CHARTS),
+    ("packing", metric_paths::PACKING),
+    ("flipped_faces", metric_paths::FLIPPED_FACES),
+    ("overlapping_faces", metric_paths::OVERLAPPING_FACES),
 ];
 
 /// The rows of the batch in `dir`, one per listed item.

@@ -67,6 +67,27 @@ pub mod names {
     pub const VERTEX_MAP: &str = "vertex_map.json";
 }
 
+/// Where each headline number sits in `metrics.json` ([`OutputMetrics`] serialised), as JSON
+/// pointers: the readers of finished runs (ablation tables, batch summaries, reports) look them up
+/// here, so a field that moves is moved once.
+pub mod metric_paths {
+    pub const BOUNDARY: &str = "/metrics/image/boundary";
+    pub const STRETCH: &str = "/metrics/image/stretch";
+    pub const CONFORMAL: &str = "/metrics/image/conformal";
+    pub const EDITABILITY: &str = "/metrics/image/editability";
+    /// The paper's "UV Eff.".
+    pub const UV_EFFICIENCY: &str = "/metrics/uv/utilisation";
+    pub const CHARTS: &str = "/metrics/partuv/charts";
+    pub const SEAM_LENGTH: &str = "/metrics/partuv/seam_length";
+    pub const ANGULAR: &str = "/metrics/partuv/angular_score";
+    pub const AREA_WORST_CHART: &str = "/metrics/partuv/area_distortion";
+    pub const AREA_OVERALL: &str = "/metrics/partuv/overall_area_distortion";
+    pub const PACKING: &str = "/metrics/partuv/packing_efficiency";
+    pub const FLIPPED_FACES: &str = "/metrics/uv/flipped_faces";
+    pub const OVERLAPPING_FACES: &str = "/metrics/uv/overlapping_faces";
+    pub const STEPS: &str = "/steps";
+}
+
 /// Why outputs could not be written.
 #[derive(Debug, thiserror::Error)]
 pub enum OutputError {

@@ -1,6 +1,8 @@
 //! The numbers a report puts side by side, read from `metrics.json` by path so that old run
 //! folders, which lack the newer numbers, show a dash where a number is missing and nothing else.
 
+use nuvo_core::outputs::metric_paths::*;
+
 /// Which way a metric is better; the comparison table marks the best run of each column.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Better {
@@ -13,7 +15,7 @@ pub enum Better {
 pub struct Column {
     pub group: &'static str,
     pub label: &'static str,
-    /// JSON pointer into `metrics.json`.
+    /// JSON pointer into `metrics.json` (`nuvo_core::outputs::metric_paths`).
     pub pointer: &'static str,
     pub better: Better,
     /// Decimals shown (0 for counts).
@@ -33,20 +35,20 @@ const fn column(
 /// The paper's metrics (Table 1), PartUV's set (`../shared/data/benchmark/README.md`), and the
 /// atlas's health.
 pub const COLUMNS: [Column; 14] = [
-    column("paper", "Boundary", "/metrics/image/boundary", Better::Higher, 4),
-    column("paper", "Stretch", "/metrics/image/stretch", Better::Higher, 4),
-    column("paper", "Conformal", "/metrics/image/conformal", Better::Higher, 4),
-    column("paper", "UV Eff.", "/metrics/uv/utilisation", Better::Higher, 4),
-    column("paper", "Editability", "/metrics/image/editability", Better::Higher, 4),
-    column("PartUV", "charts", "/metrics/partuv/charts", Better::Lower, 0),
-    column("PartUV", "seam length", "/metrics/partuv/seam_length", Better::Lower, 2),
-    column("PartUV", "angular", "/metrics/partuv/angular_score", Better::Higher, 4),
-    column("PartUV", "area (worst chart)", "/metrics/partuv/area_distortion", Better::Lower, 3),
-    column("PartUV", "area (overall)", "/metrics/partuv/overall_area_distortion", Better::Lower, 3),
-    column("PartUV", "packing", "/metrics/partuv/packing_efficiency", Better::Higher, 3),
-    column("atlas", "flipped faces", "/metrics/uv/flipped_faces", Better::Lower, 0),
-    column("atlas", "overlapping faces", "/metrics/uv/overlapping_faces", Better::Lower, 0),
-    column("atlas", "steps", "/steps", Better::Lower, 0),
+    column("paper", "Boundary", BOUNDARY, Better::Higher, 4),
+    column("paper", "Stretch", STRETCH, Better::Higher, 4),
+    column("paper", "Conformal", CONFORMAL, Better::Higher, 4),
+    column("paper", "UV Eff.", UV_EFFICIENCY, Better::Higher, 4),
+    column("paper", "Editability", EDITABILITY, Better::Higher, 4),
+    column("PartUV", "charts", CHARTS, Better::Lower, 0),
+    column("PartUV", "seam length", SEAM_LENGTH, Better::Lower, 2),
+    column("PartUV", "angular", ANGULAR, Better::Higher, 4),
+    column("PartUV", "area (worst chart)", AREA_WORST_CHART, Better::Lower, 3),
+    column("PartUV", "area (overall)", AREA_OVERALL, Better::Lower, 3),
+    column("PartUV", "packing", PACKING, Better::Higher, 3),
+    column("atlas", "flipped faces", FLIPPED_FACES, Better::Lower, 0),
+    column("atlas", "overlapping faces", OVERLAPPING_FACES, Better::Lower, 0),
+    column("atlas", "steps", STEPS, Better::Lower, 0),
 ];
 
 /// The column's number in a run's metrics, if it has one.
