@@ -145,10 +145,7 @@ pub fn run(args: &AblateArgs) -> anyhow::Result<()> {
     println!("\n{}", ablation::markdown_table(&rows));
     println!("wrote {} and {}", out.join("ablation.md").display(), out.join("ablation.csv").display());
     if !args.no_report {
-        // Every planned variant that has a folder, also those an earlier `--only` ran, in plan order.
-        let all: Vec<(String, PathBuf)> =
-            ablation::plan(&base).into_iter().map(|v| (v.name, out.join(v.dir_name))).collect();
-        crate::report::write_for_sweep(&out, &all)?;
+        write_sweep_report(&base, &out)?;
     }
     let failed = rows.iter().filter(|r| r.result.is_err()).count();
     if failed > 0 {
@@ -200,13 +197,9 @@ fn collect(
         .iter()
         .map(|v| {
             let dir = out.join(&v.dir_name);
-            let steps = ablation::load_variant(&args.config, &args.set, v).map(|l| l.config.training.steps);
-            let result = match (ablation::Scores::read(&dir.join("metrics.json")), steps) {
-                (Some(s), Ok(planned)) if s.steps >= planned => Ok(s),
-                (Some(s), Ok(planned)) => Err(format!("unfinished: {} of {planned} steps", s.steps)),
-                (_, Err(e)) => Err(crate::one_line(&anyhow::Error::new(e))),
-                (None, _) => Err(format!("not run yet (no metrics.json in {})", dir.display())),
-            };
+            let result = ablation::load_variant(&args.config, &args.set, v)
+                .map_err(|e| crate::one_line(&anyhow::Error::new(e)))
+                .and_then(|l| ablation::finished_scores(&dir, l.config.training.steps));
             let seconds = std::fs::read_to_string(dir.join(files::LOG)).map_or(0.0, |t| logged_seconds(&t));
             Row { name: v.name.clone(), dir, result, seconds }
         })
@@ -216,9 +209,7 @@ fn collect(
     println!("{}", ablation::markdown_table(&rows));
     println!("wrote {} and {}", out.join("ablation.md").display(), out.join("ablation.csv").display());
     if !args.no_report {
-        let all: Vec<(String, PathBuf)> =
-            ablation::plan(base).into_iter().map(|v| (v.name, out.join(v.dir_name))).collect();
-        crate::report::write_for_sweep(out, &all)?;
+        write_sweep_report(base, out)?;
     }
     let missing: Vec<&str> = rows.iter().filter(|r| r.result.is_err()).map(|r| r.name.as_str()).collect();
     if !missing.is_empty() {
@@ -230,6 +221,14 @@ fn collect(
         );
     }
     Ok(())
+}
+
+/// The sweep's `report.html`: every planned variant that has a folder (also those an earlier
+/// `--only` or another shard ran), in plan order.
+fn write_sweep_report(base: &config::LoadedConfig, out: &std::path::Path) -> anyhow::Result<()> {
+    let all: Vec<(String, PathBuf)> =
+        ablation::plan(base).into_iter().map(|v| (v.name, out.join(v.dir_name))).collect();
+    crate::report::write_for_sweep(out, &all)
 }
 
 /// The planned variants restricted to `only` (names or folder names), each with its place in the

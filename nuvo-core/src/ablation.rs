@@ -190,6 +190,16 @@ impl Scores {
     }
 }
 
+/// A variant's numbers when its run in `dir` has trained all of its `planned` steps, else why
+/// not: what a resumed sweep reuses and what `nuvo ablate --collect` tables.
+pub fn finished_scores(dir: &Path, planned: u64) -> Result<Scores, String> {
+    match Scores::read(&dir.join(crate::outputs::names::METRICS)) {
+        Some(s) if s.steps >= planned => Ok(s),
+        Some(s) => Err(format!("unfinished: {} of {planned} steps", s.steps)),
+        None => Err(format!("not run yet (no metrics.json in {})", dir.display())),
+    }
+}
+
 /// Why a variant produced no numbers.
 #[derive(Debug, thiserror::Error)]
 pub enum VariantError {
@@ -215,11 +225,7 @@ pub fn run_variant(
     registries: (&SourceRegistry, &LossRegistry),
     observer: &mut dyn Observer,
 ) -> Result<Scores, VariantError> {
-    let metrics_path = dir.join("metrics.json");
-    if resume
-        && let Some(done) = Scores::read(&metrics_path)
-        && done.steps >= loaded.config.training.steps
-    {
+    if resume && let Ok(done) = finished_scores(dir, loaded.config.training.steps) {
         observer.note(&format!("{} already finished; reusing its metrics", dir.display()));
         return Ok(done);
     }
