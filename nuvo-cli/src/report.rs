@@ -33,11 +33,16 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
 /// Writes the report of the run in `dir` to `dir/report.html`, for `nuvo train` and `nuvo unwrap`.
 /// The run itself is done by then, so a report that cannot be written is a warning, not a failure.
 pub fn write_for_run(dir: &Path) {
-    let out = dir.join(REPORT_HTML);
-    match nuvo_report::write_report(&[dir.to_path_buf()], &out) {
-        Ok(summary) => print_summary(&summary, &out),
+    match refresh(dir) {
+        Ok(summary) => print_summary(&summary, &dir.join(REPORT_HTML)),
         Err(e) => eprintln!("warning: no report: {e}"),
     }
+}
+
+/// (Re)writes `dir/report.html` from what the run folder holds now, saying nothing: at the end of
+/// a run ([`write_for_run`]) and at its checkpoints while it trains.
+pub fn refresh(dir: &Path) -> Result<ReportSummary, nuvo_report::ReportError> {
+    nuvo_report::write_report(&[dir.to_path_buf()], &dir.join(REPORT_HTML))
 }
 
 /// Writes the report of a sweep's variants (their folders, named as in its table) to

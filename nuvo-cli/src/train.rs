@@ -351,8 +351,7 @@ impl Observer for Progress {
         }
         self.reported = Some(Instant::now());
         if let Some(dir) = &self.report_dir
-            && let Err(e) =
-                nuvo_report::write_report(std::slice::from_ref(dir), &dir.join(nuvo_report::REPORT_HTML))
+            && let Err(e) = crate::report::refresh(dir)
         {
             // Once: a report that cannot be written now will not be written at the next checkpoint.
             self.report_dir = None;
