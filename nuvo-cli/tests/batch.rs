@@ -7,23 +7,7 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{nuvo, run};
-
-/// Settings that make one item take seconds (as in the unwrap tests).
-const FAST: &[&str] = &[
-    "training.steps=12",
-    "training.batch_3d=256",
-    "training.batch_uv=256",
-    "model.depth=2",
-    "model.width=16",
-    "model.grid_resolution=8",
-    "warm_start.samples=2000",
-    "output.atlas_resolution=256",
-    "output.eval_views=2",
-    "output.eval_resolution=64",
-    "output.renders=1",
-    "output.render_resolution=64",
-];
+use common::{FAST_UNWRAP, nuvo, run};
 
 /// A closed latitude-longitude ellipsoid with radii `r`, written as OBJ.
 fn write_ellipsoid(path: &Path, r: [f64; 3], rings: usize, segments: usize) {
@@ -69,11 +53,11 @@ fn manifest_of(dir: &Path, names: &[&str]) -> PathBuf {
     m
 }
 
-/// `nuvo batch MANIFEST -o OUT --set FAST...` with `extra` arguments and `env`.
+/// `nuvo batch MANIFEST -o OUT --set FAST_UNWRAP...` with `extra` arguments and `env`.
 fn batch(manifest: &Path, out: &Path, extra: &[&str], env: &[(&str, &str)]) -> Command {
     let mut cmd = nuvo();
     cmd.arg("batch").arg(manifest).arg("-o").arg(out).args(extra);
-    for s in FAST {
+    for s in FAST_UNWRAP {
         cmd.args(["--set", s]);
     }
     for var in

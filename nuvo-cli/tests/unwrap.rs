@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 mod common;
-use common::{nuvo, run};
+use common::{FAST_UNWRAP, nuvo, run};
 
 /// A closed latitude-longitude sphere (squashed into an ellipsoid, so it has a preferred axis),
 /// written as OBJ with 1-based indices and awkward coordinates that do not survive a scale and back.
@@ -37,36 +37,13 @@ fn write_ellipsoid(path: &Path) -> (Vec<String>, Vec<String>) {
     (v, f)
 }
 
-/// Settings that make a run take seconds; everything else is what `nuvo unwrap` chooses.
-const FAST: &[&str] = &[
-    "--set",
-    "training.steps=12",
-    "--set",
-    "training.batch_3d=256",
-    "--set",
-    "training.batch_uv=256",
-    "--set",
-    "model.depth=2",
-    "--set",
-    "model.width=16",
-    "--set",
-    "model.grid_resolution=8",
-    "--set",
-    "warm_start.samples=2000",
-    "--set",
-    "output.atlas_resolution=256",
-    "--set",
-    "output.eval_views=2",
-    "--set",
-    "output.eval_resolution=64",
-    "--set",
-    "output.renders=1",
-    "--set",
-    "output.render_resolution=64",
-];
-
 fn unwrap(input: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
-    run(nuvo().arg("unwrap").arg(input).arg("-o").arg(out).args(FAST).args(extra))
+    let mut cmd = nuvo();
+    cmd.arg("unwrap").arg(input).arg("-o").arg(out);
+    for s in FAST_UNWRAP {
+        cmd.args(["--set", s]);
+    }
+    run(cmd.args(extra))
 }
 
 fn numbers(line: &str) -> Vec<f32> {

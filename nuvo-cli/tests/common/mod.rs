@@ -16,6 +16,23 @@ pub fn repo() -> PathBuf {
 /// 8² normal grids. Fast enough for a few steps of any source.
 pub const SMALLEST_MODEL: &str = "[model]\ncharts = 2\ndepth = 2\nwidth = 16\ngrid_resolution = 8\n";
 
+/// `--set` values that make one `nuvo unwrap` take seconds; everything else is what it chooses
+/// (the unwrap and batch tests).
+pub const FAST_UNWRAP: &[&str] = &[
+    "training.steps=12",
+    "training.batch_3d=256",
+    "training.batch_uv=256",
+    "model.depth=2",
+    "model.width=16",
+    "model.grid_resolution=8",
+    "warm_start.samples=2000",
+    "output.atlas_resolution=256",
+    "output.eval_views=2",
+    "output.eval_resolution=64",
+    "output.renders=1",
+    "output.render_resolution=64",
+];
+
 /// A small experiment on the bundled bunny, written into `dir`.
 pub fn tiny_config(dir: &Path, steps: u64, checkpoint_every: u64) -> PathBuf {
     tiny_config_for(dir, &repo().join("assets/stanford-bunny.obj"), steps, checkpoint_every)
