@@ -141,6 +141,16 @@ pub const LOOP_AREA_REL: f64 = 1e-9;
 /// stretch by 1.25 one way and 0.8 the other, is about 4.33.
 pub const SPLIT_ENERGY: f64 = 4.5;
 
+/// Symmetric Dirichlet energy per unit area above which SLIM is taken to have failed on a disc
+/// re-embedded from a Tutte start (25 times an isometry's 4: faces still squeezed about tenfold).
+/// `nuvo unwrap` splits such discs on fragmented inputs, where it splits no other: of the
+/// generated unruly cow's and homer's 3,000 re-embedded discs, a handful ended there (one of
+/// 7,201 faces at 2.7e5 per unit area, its faces squeezed to specks), and splitting them raised
+/// Editability 0.7973 -> 0.8023 and 0.7660 -> 0.7687 with 6–25 more islands; thresholds of 10,
+/// 30 and 1000 gave the same within 0.0004 (BENCHMARKS.md, "Splitting the discs SLIM could not
+/// flatten").
+pub const FAILED_SLIM_ENERGY: f64 = 100.0;
+
 /// How far a face grown back over the bad ones (`Patch::grow`) may scale its rest shape, as a
 /// ratio of areas either way from the median ratio of the good faces (4: twice or half the
 /// length). Unbounded, growth went wrong on a marching-cubes vase whose charts hold both sides

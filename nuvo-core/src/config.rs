@@ -285,10 +285,12 @@ pub struct OutputConfig {
     pub injective: bool,
     /// With `injective`: the symmetric Dirichlet energy per unit area above which an island
     /// re-embedded as a disc is split into parts instead (`nuvo_atlas::injective::SPLIT_ENERGY`,
-    /// 4.5, by default). `inf` never splits a disc: on a marching-cubes mesh most islands are
+    /// 4.5, by default); `inf` never splits a disc. On a marching-cubes mesh most islands are
     /// floaters and crumbs, closed blobs whose every split is a seam in the renders while their
-    /// distortion barely moves the scores' medians, so `nuvo unwrap` sets it there (BENCHMARKS.md,
-    /// "Injective islands on fragmented meshes").
+    /// distortion barely moves the scores' medians, so `nuvo unwrap` sets it there to
+    /// `nuvo_atlas::injective::FAILED_SLIM_ENERGY` (100): only the discs SLIM could not flatten
+    /// are split (BENCHMARKS.md, "Injective islands on fragmented meshes" and "Splitting the
+    /// discs SLIM could not flatten").
     pub injective_split_energy: f64,
     /// Join small islands into a neighbouring island and smooth the seams (not in the paper;
     /// `nuvo_atlas::join`): an island under 0.2% of the surface grows onto the neighbour it shares

@@ -246,9 +246,10 @@ pub fn recipe(r: &RecipeInput) -> String {
         bake += "round_trip_tolerance = 0.1\nuntangle = true\n";
     }
     // Every island is made injective and small islands joined. On fragmented inputs (floaters,
-    // crumbs) a re-embedded island is never split: each split is a seam across a blob that the
-    // renders see, while its distortion barely moves the medians (BENCHMARKS.md, "Injective
-    // islands on fragmented meshes").
+    // crumbs) a re-embedded island is split only where SLIM could not flatten it: each split is
+    // a seam across a blob that the renders see, while its distortion barely moves the medians,
+    // but a disc left squeezed to specks shows (BENCHMARKS.md, "Injective islands on fragmented
+    // meshes" and "Splitting the discs SLIM could not flatten").
     bake += "injective = true\njoin = true\n";
     // Specks of one chart inside another become part of it where its map allows: the chart
     // network's argmax is noisy on fragmented inputs (105–184 faces absorbed on each unruly
@@ -261,7 +262,7 @@ pub fn recipe(r: &RecipeInput) -> String {
     // "Cutting islands at their necks").
     bake += "cut_necks = true\n";
     if !clean {
-        bake += "injective_split_energy = inf\n";
+        bake += &format!("injective_split_energy = {:?}\n", nuvo_atlas::injective::FAILED_SLIM_ENERGY);
     }
     if r.texture {
         bake += "texture = true\n";
@@ -659,7 +660,11 @@ mod tests {
         assert!(c.output.injective && c.output.join, "injective islands everywhere");
         assert!(c.output.absorb_enclaves);
         assert!(c.output.cut_necks, "necks cut everywhere");
-        assert_eq!(c.output.injective_split_energy, f64::INFINITY, "no splits of fragments' discs");
+        assert_eq!(
+            c.output.injective_split_energy,
+            nuvo_atlas::injective::FAILED_SLIM_ENERGY,
+            "only the fragments' discs SLIM could not flatten are split"
+        );
         assert!(c.output.refine, "refinement holds everywhere");
         assert_eq!(c.geometry.options["sampling"].as_str(), Some("visible"));
         assert_eq!(c.training.stop_when_settled, None, "fragmented inputs train to their budget");
