@@ -46,14 +46,14 @@
 //!    2017) whose triangles join the energy (rest shape: their shape at the round's start; total
 //!    weight [`SCAFFOLD_WEIGHT`] of the island's) and the line search: as two parts of the boundary
 //!    approach, the triangles between them are squeezed and push back, so the iteration slides on
-//!    instead of stalling. The triangulation is kept for up to [`SCAFFOLD_ROUNDS`] rounds (the line
-//!    search keeps its triangles positive, so it still fills the box) and made anew sooner after
-//!    a round whose step it limited; while it is kept, the system's sparsity pattern and symbolic factorisation are
-//!    reused and only its values are refilled. Boundary unknowns at one point (an island touching itself, as the
-//!    non-manifold vertices of marching-cubes meshes make it) move as one through every round and
-//!    are one point of the triangulation, and the two sides of a closed slit are one edge with no
-//!    scaffold on it; where the boundary still cannot be triangulated the round runs without a
-//!    scaffold. The rounds stop after
+//!    instead of stalling. The triangulation is kept for up to [`SCAFFOLD_ROUNDS`] rounds (the
+//!    line search keeps its triangles positive, so it still fills the box) and made anew sooner
+//!    after a round whose step it limited; while it is kept, the system's sparsity pattern and
+//!    symbolic factorisation are reused and only its values are refilled. Boundary unknowns at
+//!    one point (an island touching itself, as the non-manifold vertices of marching-cubes meshes
+//!    make it) move as one through every round and are one point of the triangulation, and the
+//!    two sides of a closed slit are one edge with no scaffold on it; where the boundary still
+//!    cannot be triangulated the round runs without a scaffold. The rounds stop after
 //!    [`InjectiveOptions::iterations`], or when one lowers the energy by less than
 //!    [`InjectiveOptions::tolerance`] (relative).
 //!
@@ -78,7 +78,8 @@
 //!   (plus [`BOUNDARY_TURN_SLACK`]); no two boundary segments that share no endpoint cross
 //!   properly (touching, as the two sides of a closed slit do, covers no area twice and is
 //!   allowed); and exactly one boundary loop is counter-clockwise with more than a
-//!   [`LOOP_AREA_REL`] share of the island's area (the outer one). For such a map every point of the plane is covered at most once.
+//!   [`LOOP_AREA_REL`] share of the island's area (the outer one). For such a map every point of
+//!   the plane is covered at most once.
 //! - **Orientation and place**: every island comes out counter-clockwise (a mirrored island of the
 //!   input is mirrored back to a true image of its surface, so no output face is flipped against
 //!   any majority), scaled to the island's input texel density (`sqrt(uv area / 3-D area)`;
@@ -130,7 +131,7 @@ pub const SCAFFOLD_MARGIN: f64 = 0.5;
 /// and stiffen the global step: kept for good, SLIM ended 10–20% further above an isometry's
 /// energy on Common Shapes (rocker-arm 4.0295 against 4.0245 per unit area) and the mean angular
 /// score fell 0.001. Every 4 rounds: the same scores as a new triangulation every round
-/// (Editability 0.9560 against 0.9558, angular 0.9538 against 0.9537), in a third of the time
+/// (Editability 0.9560 against 0.9558, angular 0.9538 against 0.9537), in 40% of the time
 /// (BENCHMARKS.md, "SLIM's system kept between rounds").
 pub const SCAFFOLD_ROUNDS: usize = 4;
 /// The scaffold's total weight, as a share of the patch's.
@@ -1979,7 +1980,7 @@ fn slim_terms(rest: &Rest, q: [[f64; 2]; 3]) -> Option<([[f64; 6]; 4], [f64; 4])
 /// of triangles over the patch's unknowns, where each triangle's entries land in it, and its
 /// symbolic factorisation (fill-reducing ordering and elimination structure). Built once for a
 /// set of triangles and refilled every round: building it (sorting the entries, the ordering,
-/// the symbolic analysis) cost twice what the numeric factorisation does, measured on the
+/// the symbolic analysis) cost over twice what the numeric factorisation does, measured on the
 /// bunny's bake.
 struct Pattern {
     matrix: SparseColMat<usize, f64>,
