@@ -524,6 +524,12 @@ impl Rest {
     }
 }
 
+/// A key equal for two positions exactly when they are the same point: `+ 0.0` makes −0.0 the
+/// same key as 0.0, as the triangulation compares them.
+fn point_key(p: [f64; 2]) -> (u64, u64) {
+    ((p[0] + 0.0).to_bits(), (p[1] + 0.0).to_bits())
+}
+
 /// `x > 0`, false for NaN: the test every area and determinant must pass.
 fn is_positive(x: f64) -> bool {
     x > 0.0
@@ -786,9 +792,7 @@ impl Patch {
         // faces overlapping in an atlas that passed every other test).
         let mut turn_at: HashMap<(u64, u64), f64> = HashMap::new();
         for v in (0..self.n).filter(|&v| self.topology.on_boundary[v]) {
-            // `+ 0.0` makes −0.0 the same key as 0.0.
-            let key = ((p[v][0] + 0.0).to_bits(), (p[v][1] + 0.0).to_bits());
-            *turn_at.entry(key).or_insert(0.0) += angle[v];
+            *turn_at.entry(point_key(p[v])).or_insert(0.0) += angle[v];
         }
         if turn_at.values().any(|&a| a > tau + BOUNDARY_TURN_SLACK) {
             return false;
@@ -1049,9 +1053,7 @@ impl Patch {
         let mut first: HashMap<(u64, u64), u32> = HashMap::new();
         for v in 0..self.n {
             if self.topology.on_boundary[v] {
-                // `+ 0.0` makes −0.0 the same key as 0.0, as the triangulation compares them.
-                let key = ((p[v][0] + 0.0).to_bits(), (p[v][1] + 0.0).to_bits());
-                glue[v] = *first.entry(key).or_insert(v as u32);
+                glue[v] = *first.entry(point_key(p[v])).or_insert(v as u32);
             }
         }
         glue
@@ -1776,6 +1778,8 @@ struct Scaffold {
     /// `n + k` the fixed box corner `k`.
     tris: Vec<[u32; 3]>,
     rest: Vec<Rest>,
+    /// Every triangle's weight: [`SCAFFOLD_WEIGHT`] of the patch's, shared equally.
+    weight: f64,
     corners: [[f64; 2]; 4],
     n: usize,
 }
@@ -1878,33 +1882,23 @@ impl Scaffold {
                 tris.push(f.vertices().map(|v| id(v.fix().index())));
             }
         }
-        let mut out = Scaffold { tris, rest: Vec::new(), corners, n };
         let total: f64 = patch.live().map(|(t, _)| patch.rest[t].weight).sum();
-        let weight = SCAFFOLD_WEIGHT * total / out.tris.len().max(1) as f64;
-        let mut rest = Vec::with_capacity(out.tris.len());
-        for t in &out.tris {
-            let x = t.map(|v| out.pos(p, v));
-            if !is_positive(area2(x)) {
-                return None;
-            }
-            rest.push(Rest::new(x, weight, false));
-        }
-        out.rest = rest;
-        Some(out)
+        let weight = SCAFFOLD_WEIGHT * total / tris.len().max(1) as f64;
+        Scaffold { tris, rest: Vec::new(), weight, corners, n }.rested(p)
     }
 
-    /// The same triangulation with its rest shapes (and weights) taken at `p`, as
-    /// [`Scaffold::build`] takes them; `None` when a triangle is not positive at `p`.
+    /// The same triangulation with its rest shapes taken at `p` (their shapes there, each of
+    /// weight `self.weight`); `None` when a triangle is not positive at `p`.
     fn rested(mut self, p: &[[f64; 2]]) -> Option<Scaffold> {
-        let (n, corners) = (self.n, self.corners);
-        let pos = |v: u32| if (v as usize) < n { p[v as usize] } else { corners[v as usize - n] };
-        for (t, r) in self.tris.iter().zip(self.rest.iter_mut()) {
-            let x = t.map(pos);
-            if !is_positive(area2(x)) {
-                return None;
-            }
-            *r = Rest::new(x, r.weight, false);
-        }
+        let rest = self
+            .tris
+            .iter()
+            .map(|t| {
+                let x = t.map(|v| self.pos(p, v));
+                is_positive(area2(x)).then(|| Rest::new(x, self.weight, false))
+            })
+            .collect::<Option<Vec<Rest>>>()?;
+        self.rest = rest;
         Some(self)
     }
 
@@ -2062,16 +2056,11 @@ struct SlimSystem {
 
 impl SlimSystem {
     fn new(patch: &Patch, glue: Vec<u32>) -> Option<SlimSystem> {
-        let faces = Self::island_faces(patch, &glue);
+        let faces: Vec<[u32; 3]> = glued_faces(patch, &glue).map(|(c, _)| c).collect();
         let island = Pattern::new(patch.n, &faces)?;
         let live = patch.live().count().max(1);
         let proximal = 1e-4 * patch.live().map(|(t, _)| patch.rest[t].weight).sum::<f64>() / live as f64;
         Some(SlimSystem { island, with_scaffold: None, glue, proximal })
-    }
-
-    /// The live faces' corners on the glued unknowns, in `Patch::live` order.
-    fn island_faces(patch: &Patch, glue: &[u32]) -> Vec<[u32; 3]> {
-        patch.live().map(|(_, c)| c.map(|v| glue[v as usize])).collect()
     }
 
     /// Forgets the scaffold's pattern: the next [`SlimSystem::global_scaffold`] builds one for
@@ -2083,8 +2072,7 @@ impl SlimSystem {
     /// The global step at `p`: the positions minimising `Σ_t A_t ‖W_t (J_t − R_t)‖² +
     /// proximal ‖q − p‖²`, with SLIM's weights `W_t` and rotations `R_t` of `p`.
     fn global(&mut self, patch: &Patch, p: &[[f64; 2]]) -> Option<Vec<[f64; 2]>> {
-        let glue = &self.glue;
-        let faces = patch.live().map(|(t, c)| (c.map(|v| glue[v as usize]), &patch.rest[t]));
+        let faces = glued_faces(patch, &self.glue);
         let x = solve(&mut self.island, patch.n, self.proximal, p, faces, &[])?;
         self.unglued(&x)
     }
@@ -2094,15 +2082,13 @@ impl SlimSystem {
     /// `sc` must be the same triangulation (its rest shapes may change) until then.
     fn global_scaffold(&mut self, patch: &Patch, p: &[[f64; 2]], sc: &Scaffold) -> Option<Vec<[f64; 2]>> {
         let glue = &self.glue;
+        let all = || glued_faces(patch, glue).chain(sc.tris.iter().copied().zip(&sc.rest));
         if self.with_scaffold.is_none() {
-            let mut all = Self::island_faces(patch, glue);
-            all.extend_from_slice(&sc.tris);
-            self.with_scaffold = Some(Pattern::new(patch.n, &all)?);
+            let corners: Vec<[u32; 3]> = all().map(|(c, _)| c).collect();
+            self.with_scaffold = Some(Pattern::new(patch.n, &corners)?);
         }
         let pattern = self.with_scaffold.as_mut().expect("built above");
-        let faces = patch.live().map(|(t, c)| (c.map(|v| glue[v as usize]), &patch.rest[t]));
-        let all = faces.chain(sc.tris.iter().copied().zip(&sc.rest));
-        let x = solve(pattern, patch.n, self.proximal, p, all, &sc.corners)?;
+        let x = solve(pattern, patch.n, self.proximal, p, all(), &sc.corners)?;
         self.unglued(&x)
     }
 
@@ -2114,6 +2100,12 @@ impl SlimSystem {
             self.glue.iter().map(|&g| [x[(g as usize, 0)], x[(n + g as usize, 0)]]).collect();
         q.iter().flatten().all(|v| v.is_finite()).then_some(q)
     }
+}
+
+/// The live faces of `patch` with their corners on the glued unknowns and their rest shapes, in
+/// `Patch::live` order: the island's triangles of every SLIM system.
+fn glued_faces<'p>(patch: &'p Patch, glue: &'p [u32]) -> impl Iterator<Item = ([u32; 3], &'p Rest)> + 'p {
+    patch.live().map(move |(t, c)| (c.map(|v| glue[v as usize]), &patch.rest[t]))
 }
 
 /// Fills `pattern` with SLIM's reweighted terms of `triangles` (in the order the pattern was
