@@ -157,8 +157,9 @@ pub struct TrainingConfig {
     /// redo the distortion within each chart), while training on would mostly merge the last
     /// small charts. That holds for bakes with the layout passes (`output.refine`, `injective`,
     /// `packing = "islands"`, as `nuvo unwrap` sets them); without them the networks' own maps
-    /// are the atlas and keep improving. `steps` stays the most a run takes. Runs of one chart
-    /// ignore it (nothing to assign). Not in the paper.
+    /// are the atlas and keep improving. `steps` stays the most a run takes. A run of one chart
+    /// has nothing to assign: it stops once its map's shape holds still instead
+    /// (`crate::trainer::ONE_CHART_SHAPE_SETTLED`). Not in the paper.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub stop_when_settled: Option<f32>,
     /// Finite-difference step of the distortion losses, in the model frame (the paper: 1e-2).

@@ -13,7 +13,7 @@
 //!    can start the surface fold-free;
 //! 5. [`fit_steps`]: the step count that fits the time budget on this machine, from timed steps:
 //!    the most the run takes, since it stops once the atlas has settled (`training.
-//!    stop_when_settled`, `crate::settling`) when it has more than one chart.
+//!    stop_when_settled`, `crate::settling`): its charts, or a single chart's map, hold still.
 //!
 //! The result is an ordinary config: written as `config.toml`, `nuvo train` reproduces the run.
 
@@ -430,7 +430,11 @@ pub fn fit_steps(trainer: &mut Trainer, budget_seconds: f64) -> Result<(u64, Dec
         if settles { "at most: " } else { "" },
         1e3 * per_step,
         1e3 * per_step * MEAN_STEP_COST,
-        if settles { "; training stops sooner once the charts hold still" } else { "" }
+        match (settles, trainer.config().model.charts) {
+            (false, _) => "",
+            (true, 1) => "; training stops sooner once the chart's map holds still",
+            (true, _) => "; training stops sooner once the charts hold still",
+        }
     );
     Ok((steps, Decision::new("steps", steps, why)))
 }
