@@ -293,6 +293,11 @@ pub struct OutputConfig {
     /// are split (BENCHMARKS.md, "Injective islands on fragmented meshes" and "Splitting the
     /// discs SLIM could not flatten").
     pub injective_split_energy: f64,
+    /// With `injective`: cut each solved island open from its cone points (where the surface
+    /// gathers an angle deficit that no flat map holds without distortion) to its boundary, and
+    /// keep the cuts where SLIM then lowers the island's distortion enough (not in the paper;
+    /// `nuvo_atlas::injective`, step 6). Off by default.
+    pub cut_cones: bool,
     /// Join small islands into a neighbouring island and smooth the seams (not in the paper;
     /// `nuvo_atlas::join`): an island under 0.2% of the surface grows onto the neighbour it shares
     /// the longest edge with, and a face with two edges on a seam moves across it, wherever the
@@ -353,6 +358,7 @@ impl Default for OutputConfig {
             injective_split_energy: nuvo_atlas::injective::SPLIT_ENERGY,
             join: false,
             cut_necks: false,
+            cut_cones: false,
             packing: Packing::Squares,
             eval_views: 16,
             eval_resolution: 800,
@@ -988,6 +994,9 @@ mod tests {
     #[test]
     fn cut_necks_is_off_by_default_and_a_boolean() {
         assert!(!from_str("c.toml", MINIMAL).unwrap().config.output.cut_necks);
+        assert!(!from_str("c.toml", MINIMAL).unwrap().config.output.cut_cones);
+        let cones = from_str("c.toml", &format!("{MINIMAL}[output]\ncut_cones = true\n")).unwrap();
+        assert!(cones.config.output.cut_cones);
         let on = from_str("c.toml", &format!("{MINIMAL}[output]\ncut_necks = true\n")).unwrap();
         assert!(on.config.output.cut_necks);
         let e = from_str("c.toml", &format!("{MINIMAL}[output]\ncut_necks = 1\n")).unwrap_err().to_string();

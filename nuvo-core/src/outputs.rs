@@ -185,7 +185,8 @@ fn finish_layout(
         phases.done("refine");
     }
     if opts.injective {
-        let injective = make_injective(&mesh, &injective_options(opts))?;
+        let cones = InjectiveOptions { cut_cones: opts.cut_cones, ..injective_options(opts) };
+        let injective = make_injective(&mesh, &cones)?;
         mesh = injective.mesh;
         summary.injective = Some(injective.report);
         phases.done("injective");
