@@ -261,13 +261,11 @@ pub fn recipe(r: &RecipeInput) -> String {
     // of thousands of islands, as on marching-cubes meshes, are left alone; BENCHMARKS.md,
     // "Cutting islands at their necks").
     bake += "cut_necks = true\n";
-    // On a clean surface every solved disc is cut open from its cone points to its boundary where
-    // SLIM then gains (Common Shapes: angular 0.955 -> 0.961, worst-chart area 1.21 -> 1.10,
-    // Editability 0.9556 -> 0.9572, no mesh lower; BENCHMARKS.md, "Cutting discs open at their
-    // cone points"). Not measured on fragmented inputs, so off there.
-    if clean {
-        bake += "cut_cones = true\n";
-    }
+    // Every solved disc is cut open from its cone points to its boundary where SLIM then gains
+    // (Common Shapes: angular 0.955 -> 0.961, worst-chart area 1.21 -> 1.10, Editability 0.9556
+    // -> 0.9572, no mesh lower; the unruly meshes and grid: +0.019 to +0.063, the generated
+    // homer 0.769 -> 0.832; BENCHMARKS.md, "Cutting discs open at their cone points").
+    bake += "cut_cones = true\n";
     if !clean {
         bake += &format!("injective_split_energy = {:?}\n", nuvo_atlas::injective::FAILED_SLIM_ENERGY);
     }
@@ -657,7 +655,7 @@ mod tests {
         assert_eq!((clean.model.charts, clean.training.steps, clean.seed), (5, 900, 3));
         assert!(clean.output.untangle && clean.output.round_trip_tolerance > 0.0 && clean.output.injective);
         assert!(clean.output.join && clean.output.absorb_enclaves && clean.output.cut_necks);
-        assert!(clean.output.cut_cones, "clean surfaces are cut at their cone points");
+        assert!(clean.output.cut_cones, "discs are cut at their cone points");
         assert_eq!(clean.output.injective_split_energy, nuvo_atlas::injective::SPLIT_ENERGY);
         assert_eq!(clean.training.time_budget_minutes, Some(1.5));
         assert_eq!(clean.training.stop_when_settled, Some(0.015));
@@ -672,7 +670,7 @@ mod tests {
         assert!(c.output.injective && c.output.join, "injective islands everywhere");
         assert!(c.output.absorb_enclaves);
         assert!(c.output.cut_necks, "necks cut everywhere");
-        assert!(!c.output.cut_cones, "cone cuts on clean surfaces only");
+        assert!(c.output.cut_cones, "cone cuts everywhere");
         assert_eq!(
             c.output.injective_split_energy,
             nuvo_atlas::injective::FAILED_SLIM_ENERGY,
