@@ -66,10 +66,10 @@
 //!    [`CONE_DEFICIT`], that are farther than that radius from the boundary (which already
 //!    relieves them), strongest first, none within twice the radius of one taken, at most
 //!    [`MAX_CONES`]. Each is cut along the shortest edge path to the boundary or to a slit cut
-//!    before, so the patch stays a disc. Each copy of a cut vertex starts a share (0.2, halved
-//!    until the map is injective) of the way towards its own fan's centre, so the sides are
-//!    apart, and SLIM (its first round without a scaffold, which would hold the hair-thin slits
-//!    shut) runs from there. The cuts are kept when they remove at least [`CONE_GAIN`] of the
+//!    before, so the patch stays a disc. Each copy of a cut vertex starts a share
+//!    ([`SLIT_SHARE`], halved until the map is injective) of the way towards its own fan's
+//!    centre, so the sides are apart, and SLIM (its first round without a scaffold, which would
+//!    hold the hair-thin slits shut) runs from there. The cuts are kept when they remove at least [`CONE_GAIN`] of the
 //!    disc's energy above an isometry's (`E − 4A`); otherwise the disc stays as it was solved.
 //!    Cone cuts add seams but no island.
 //!
@@ -185,6 +185,10 @@ pub const CONE_DEFICIT: f64 = std::f64::consts::FRAC_PI_6;
 /// Cone points cut per patch at most: the strongest. 16 cut two more on the cow and lost 0.0025
 /// of its Editability.
 pub const MAX_CONES: usize = 8;
+/// How far towards its own fan's centre each copy of a cut vertex starts (module docs, step 6).
+pub const SLIT_SHARE: f64 = 0.2;
+/// How many times [`SLIT_SHARE`] is halved before cuts whose start is not injective are given up.
+pub const SLIT_HALVINGS: usize = 8;
 /// Share of a disc's energy above an isometry's that its cone cuts must remove to be kept. 0.1
 /// kept more cuts on the cow and homer at the same mean Editability (0.9477 against 0.9478).
 pub const CONE_GAIN: f64 = 0.2;
@@ -1309,7 +1313,9 @@ impl Patch {
                 })
                 .collect()
         };
-        let q = (0..8).map(|h| start(0.2 * 0.5f64.powi(h))).find(|q| coned.is_injective(q))?;
+        let q = (0..SLIT_HALVINGS as i32)
+            .map(|h| start(SLIT_SHARE * 0.5f64.powi(h)))
+            .find(|q| coned.is_injective(q))?;
         let (q, rounds) = coned.slim_from(q, opts, 1);
         let (before, after) = (self.energy(p)?, coned.energy(&q)?);
         let excess = before - 4.0 * self.area3;
@@ -1324,8 +1330,9 @@ impl Patch {
     /// The cone points of this disc (module docs, step 6), strongest first.
     fn cone_points(&self) -> Vec<u32> {
         let n = self.n;
-        // Angle sums of the faces with a true 3-D area round each unknown; unknowns touching
-        // another face, or on the boundary, have no deficit of their own.
+        // Angle sums of the faces with a true 3-D area round each unknown; unknowns on the
+        // boundary, or touching a face without 3-D area (whose rest angles are made up), have no
+        // deficit of their own.
         let mut angle = vec![0.0f64; n];
         let mut usable: Vec<bool> = self.topology.on_boundary.iter().map(|b| !b).collect();
         for (t, c) in self.live() {
