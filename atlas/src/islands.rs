@@ -65,7 +65,7 @@
 //! - **Shapes**: rectangles waste what an island leaves empty in its bounding rectangle (an L,
 //!   a long limb turned at an angle, a one-chart relief longer than wide). Up to
 //!   [`SHAPES_UP_TO`] islands the islands are therefore also packed by their shapes (the
-//!   [`shapes`] module: the texels each face touches, placed on a bitmap of the atlas so that no
+//!   `shapes` module: the texels each face touches, placed on a bitmap of the atlas so that no
 //!   texel comes within `gutter` of another island's, turned by multiples of 45° after the
 //!   minimum-area rotation), by bisection on `scale` from the rectangles' scale upwards (to 2e-4
 //!   relative), and the packing with the larger scale is kept. The gutter then holds between
@@ -682,7 +682,7 @@ enum Arrangement {
     Shapes(Vec<ShapePlaced>),
 }
 
-/// Up to this many islands their shapes are packed too ([`shapes`]), and the packing of the
+/// Up to this many islands their shapes are packed too (`shapes`), and the packing of the
 /// larger scale is kept. Beyond, only rectangles: the shape search's cost grows with the islands
 /// already placed (measured in BENCHMARKS.md, "Shape packing").
 pub const SHAPES_UP_TO: usize = 500;
