@@ -237,6 +237,12 @@ fn print_report(report: &OutputReport, seconds: f64) {
         );
         let phases: Vec<String> = report.phase_seconds.iter().map(|(p, s)| format!("{p} {s:.1}")).collect();
         println!("       seconds per phase: {}", phases.join(", "));
+        if let Some(inj) = m.layout.injective.as_ref().filter(|r| r.cones > 0) {
+            println!(
+                "       cone points cut open to their island's boundary: {} on {} islands",
+                inj.cones, inj.coned_islands
+            );
+        }
         if let Some(n) = m.layout.necks.as_ref().filter(|n| !n.skipped) {
             println!(
                 "       islands cut at their necks: {} (packing efficiency at 512²: {:.3} -> {:.3}; {} trials)",
