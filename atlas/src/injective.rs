@@ -69,9 +69,9 @@
 //!    before, so the patch stays a disc. Each copy of a cut vertex starts a share
 //!    ([`SLIT_SHARE`], halved until the map is injective) of the way towards its own fan's
 //!    centre, so the sides are apart, and SLIM (its first round without a scaffold, which would
-//!    hold the hair-thin slits shut) runs from there. The cuts are kept when they remove at least [`CONE_GAIN`] of the
-//!    disc's energy above an isometry's (`E − 4A`); otherwise the disc stays as it was solved.
-//!    Cone cuts add seams but no island.
+//!    hold the hair-thin slits shut) runs from there. The cuts are kept when they remove at least
+//!    [`CONE_GAIN`] of the disc's energy above an isometry's (`E − 4A`); otherwise the disc stays
+//!    as it was solved. Cone cuts add seams but no island.
 //!
 //! Definitions (exact):
 //! - **Island**: a chart of [`crate::uvstats::uv_charts`]; its **unknowns** are those of
@@ -598,6 +598,14 @@ fn point_key(p: [f64; 2]) -> (u64, u64) {
     ((p[0] + 0.0).to_bits(), (p[1] + 0.0).to_bits())
 }
 
+/// The signed angle of triangle `q` at corner `k`, from the edge to corner `k + 1` to the edge to
+/// corner `k + 2` (positive in a counter-clockwise triangle).
+fn corner_angle(q: [[f64; 2]; 3], k: usize) -> f64 {
+    let (o, a, b) = (q[k], q[(k + 1) % 3], q[(k + 2) % 3]);
+    let (u, v) = ([a[0] - o[0], a[1] - o[1]], [b[0] - o[0], b[1] - o[1]]);
+    (u[0] * v[1] - u[1] * v[0]).atan2(u[0] * v[0] + u[1] * v[1])
+}
+
 /// `x > 0`, false for NaN: the test every area and determinant must pass.
 fn is_positive(x: f64) -> bool {
     x > 0.0
@@ -842,9 +850,7 @@ impl Patch {
                 return false;
             }
             for k in 0..3 {
-                let (a, b, o) = (q[(k + 1) % 3], q[(k + 2) % 3], q[k]);
-                let (u, v) = ([a[0] - o[0], a[1] - o[1]], [b[0] - o[0], b[1] - o[1]]);
-                angle[c[k] as usize] += (u[0] * v[1] - u[1] * v[0]).atan2(u[0] * v[0] + u[1] * v[1]);
+                angle[c[k] as usize] += corner_angle(q, k);
             }
         }
         let tau = std::f64::consts::TAU;
@@ -1233,13 +1239,9 @@ impl Patch {
 
     /// Cuts the edges of the path that `prev` leads along from `v` back to its source, then
     /// takes the topology again.
-    fn cut_along(&mut self, prev: &[u32], mut v: u32) {
-        let mut cut = HashSet::new();
-        while prev[v as usize] != u32::MAX {
-            let u = prev[v as usize];
-            cut.insert((u.min(v), u.max(v)));
-            v = u;
-        }
+    fn cut_along(&mut self, prev: &[u32], v: u32) {
+        let cut: HashSet<(u32, u32)> =
+            path_back(prev, v).into_iter().map(|(u, w)| (u.min(w), u.max(w))).collect();
         let (corners, n) = separate_fans(std::mem::take(&mut self.corners), &self.collapsed, self.n, &cut);
         (self.corners, self.n) = (corners, n);
         self.topology = self.topology();
@@ -1252,21 +1254,19 @@ impl Patch {
         if !self.topology.disc || self.area3 <= 0.0 {
             return None;
         }
-        let cones = self.cone_points();
+        let (_, adj) = self.edge_graph();
+        let cones = self.cone_points(&adj);
         if cones.is_empty() {
             return None;
         }
-        let (_, adj) = self.edge_graph();
         let mut target = self.topology.on_boundary.clone();
         let mut cut = HashSet::new();
         for &c in &cones {
             let (_, prev, reached) = shortest_paths(&adj, &[c], |v| target[v as usize], |_| true);
-            let Some(mut v) = reached else { continue };
-            while v != c {
-                let u = prev[v as usize];
-                cut.insert((u.min(v), u.max(v)));
-                target[v as usize] = true;
-                v = u;
+            let Some(v) = reached else { continue };
+            for (u, w) in path_back(&prev, v) {
+                cut.insert((u.min(w), u.max(w)));
+                target[w as usize] = true;
             }
             target[c as usize] = true;
         }
@@ -1327,8 +1327,9 @@ impl Patch {
         })
     }
 
-    /// The cone points of this disc (module docs, step 6), strongest first.
-    fn cone_points(&self) -> Vec<u32> {
+    /// The cone points of this disc (module docs, step 6), strongest first; `adj` is its
+    /// [`Patch::edge_graph`].
+    fn cone_points(&self, adj: &Adjacency) -> Vec<u32> {
         let n = self.n;
         // Angle sums of the faces with a true 3-D area round each unknown; unknowns on the
         // boundary, or touching a face without 3-D area (whose rest angles are made up), have no
@@ -1342,22 +1343,20 @@ impl Patch {
                     usable[c[k] as usize] = false;
                     continue;
                 }
-                let (o, a, b) = (x[k], x[(k + 1) % 3], x[(k + 2) % 3]);
-                let (u, v) = ([a[0] - o[0], a[1] - o[1]], [b[0] - o[0], b[1] - o[1]]);
-                angle[c[k] as usize] += (u[0] * v[1] - u[1] * v[0]).abs().atan2(u[0] * v[0] + u[1] * v[1]);
+                // Rest shapes are positive triangles: their signed angles are their angles.
+                angle[c[k] as usize] += corner_angle(x, k);
             }
         }
         let deficit: Vec<f64> =
             (0..n).map(|v| if usable[v] { std::f64::consts::TAU - angle[v] } else { 0.0 }).collect();
-        let (_, adj) = self.edge_graph();
         let radius = CONE_RADIUS * self.area3.sqrt();
         let boundary: Vec<u32> = (0..n as u32).filter(|&v| self.topology.on_boundary[v as usize]).collect();
-        let (to_boundary, _, _) = shortest_paths(&adj, &boundary, |_| false, |_| true);
+        let (to_boundary, _, _) = shortest_paths(adj, &boundary, |_| false, |_| true);
         let mut ball = Ball::new(n);
         let mut candidates: Vec<(f64, u32)> = (0..n as u32)
             .filter(|&v| deficit[v as usize] > 0.0 && to_boundary[v as usize] > radius)
             .filter_map(|v| {
-                let k: f64 = ball.around(&adj, v, radius).iter().map(|&w| deficit[w as usize]).sum();
+                let k: f64 = ball.around(adj, v, radius).iter().map(|&w| deficit[w as usize]).sum();
                 (k >= CONE_DEFICIT).then_some((k, v))
             })
             .collect();
@@ -1372,7 +1371,7 @@ impl Patch {
                 continue;
             }
             cones.push(v);
-            for w in ball.around(&adj, v, 2.0 * radius) {
+            for w in ball.around(adj, v, 2.0 * radius) {
                 taken[w as usize] = true;
             }
         }
@@ -1880,6 +1879,18 @@ pub(crate) fn shortest_paths(
         }
     }
     (dist, prev, None)
+}
+
+/// The edges of the path that [`shortest_paths`]' `prev` leads along from `v` back to its source,
+/// as `(prev[w], w)` from `v`'s end.
+pub(crate) fn path_back(prev: &[u32], mut v: u32) -> Vec<(u32, u32)> {
+    let mut edges = Vec::new();
+    while prev[v as usize] != u32::MAX {
+        let u = prev[v as usize];
+        edges.push((u, v));
+        v = u;
+    }
+    edges
 }
 
 /// Bounded Dijkstra balls on one graph, reusing their distance array between calls.

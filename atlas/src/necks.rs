@@ -61,7 +61,7 @@ use serde::Serialize;
 
 use crate::error::AtlasError;
 use crate::geom::to_dvec3;
-use crate::injective::shortest_paths;
+use crate::injective::{path_back, shortest_paths};
 use crate::islands::{
     IslandPacking, SHAPES_UP_TO, ScaleTest, convex_hull, min_area_rotation, pack_islands, packs_at_scale,
     rotated,
@@ -391,13 +391,10 @@ fn neck_cuts(mesh: &TriMesh, uv: &UvLayer, faces: &[u32], count: usize) -> Vec<(
             continue;
         }
         let mut cut_edges: HashSet<(u32, u32)> = HashSet::new();
-        let mut v = vb;
         let mut seam = 0.0;
-        while v != va {
-            let p = prev[v as usize];
+        for (p, v) in path_back(&prev, vb) {
             cut_edges.insert((p.min(v), p.max(v)));
             seam += length3(p, v);
-            v = p;
         }
         let Some(side) = two_parts(corners.len(), &by_edge, &cut_edges) else { continue };
         let moved_faces: Vec<u32> = faces.iter().zip(&side).filter(|(_, s)| **s).map(|(&f, _)| f).collect();
