@@ -67,8 +67,9 @@
 //!   [`SHAPES_UP_TO`] islands the islands are therefore also packed by their shapes (the
 //!   `shapes` module: the texels each face touches, placed on a bitmap of the atlas so that no
 //!   texel comes within `gutter` of another island's, turned by multiples of 45° after the
-//!   minimum-area rotation), by bisection on `scale` from the rectangles' scale upwards (to 2e-4
-//!   relative), and the packing with the larger scale is kept. The gutter then holds between
+//!   minimum-area rotation; three placement rules, `best_shapes`), by bisection on `scale` from
+//!   the rectangles' scale upwards (to 2e-4 relative), and the packing with the larger scale is
+//!   kept. The gutter then holds between
 //!   the texels the islands touch rather than between their cells, and each island keeps
 //!   `floor(gutter / 2)` texels free at the low side of each axis and `ceil(gutter / 2)` at the
 //!   high side. Measured in BENCHMARKS.md ("Shape packing"): spot's own 13 charts 0.619 → 0.696
@@ -91,7 +92,7 @@ use crate::geom::to_dvec3;
 use crate::uvstats::{DEGENERATE_AREA_REL, degenerate_3d_faces, face_uv_area2, require_uv, uv_charts};
 
 mod shapes;
-use shapes::ShapePlaced;
+use shapes::{Rule, ShapePlaced};
 
 /// Largest atlas side [`pack_islands`] accepts, in texels.
 pub const MAX_RESOLUTION: u32 = 1 << 16;
@@ -688,10 +689,15 @@ enum Arrangement {
 pub const SHAPES_UP_TO: usize = 500;
 
 /// The largest atlas scale found, by bisection from `from` (to 2e-4 relative), at which the
-/// islands' shapes pack ([`shapes::pack_shapes`], islands by decreasing 3-D area, else by
-/// decreasing longest side, else by decreasing bounding-rectangle area: the third order took
-/// Common Shapes from 0.4915 to 0.4959), with that packing; `None` when they do not pack even at
-/// `from`.
+/// islands' shapes pack ([`shapes::pack_shapes`]), with that packing; `None` when they do not
+/// pack even at `from`. A scale packs when one of five attempts fits every island, tried in
+/// turn: the lowest-top rule ([`Rule::LowestTop`]) with the islands by decreasing 3-D area, else
+/// by decreasing longest side, else by decreasing bounding-rectangle area (the third order took
+/// Common Shapes from 0.4915 to 0.4959), then the corner and square rules ([`Rule::Corner`],
+/// [`Rule::Square`]) by decreasing area. Measured on the 14 Common Shapes atlases at 2048²
+/// (BENCHMARKS.md, "Three placement rules"): the two added rules took the mean efficiency from
+/// 0.582 to 0.601 for 1.4× the packing time; both rules in all three orders reached 0.603 for
+/// 2.2×.
 fn best_shapes(
     islands: &[Island],
     res: u32,
@@ -722,11 +728,9 @@ fn best_shapes(
     Some(best)
 }
 
-/// The orders in which [`best_shapes`] places islands, in turn (its docs).
+/// The placement rules and island orders [`best_shapes`] tries, in turn (its docs).
 struct ShapeOrders {
-    by_area: Vec<usize>,
-    by_side: Vec<usize>,
-    by_box: Vec<usize>,
+    attempts: Vec<(Rule, Vec<usize>)>,
 }
 
 impl ShapeOrders {
@@ -737,14 +741,20 @@ impl ShapeOrders {
             o.sort_by(|&a, &b| k(b).total_cmp(&k(a)).then(a.cmp(&b)));
             o
         };
-        ShapeOrders {
-            by_area: order(&|i| i.area_3d),
-            by_side: order(&|i| i.growth * i.extent[0].max(i.extent[1])),
-            by_box: order(&|i| i.growth * i.growth * i.extent[0] * i.extent[1]),
-        }
+        let by_area = order(&|i| i.area_3d);
+        let by_side = order(&|i| i.growth * i.extent[0].max(i.extent[1]));
+        let by_box = order(&|i| i.growth * i.growth * i.extent[0] * i.extent[1]);
+        let attempts = vec![
+            (Rule::LowestTop, by_area.clone()),
+            (Rule::LowestTop, by_side),
+            (Rule::LowestTop, by_box),
+            (Rule::Corner, by_area.clone()),
+            (Rule::Square, by_area),
+        ];
+        ShapeOrders { attempts }
     }
 
-    /// The islands' shapes packed at `scale` in the first order that fits them.
+    /// The islands' shapes packed at `scale` by the first attempt that fits them.
     fn pack(
         &self,
         islands: &[Island],
@@ -754,9 +764,7 @@ impl ShapeOrders {
         rotate: bool,
     ) -> Option<Vec<ShapePlaced>> {
         let fps = shapes::footprints(islands, |i: &Island| i.texels_per_unit(scale, res), rotate);
-        [&self.by_area, &self.by_side, &self.by_box]
-            .into_iter()
-            .find_map(|order| shapes::pack_shapes(&fps, order, res, gutter))
+        self.attempts.iter().find_map(|(rule, order)| shapes::pack_shapes(&fps, order, res, gutter, *rule))
     }
 }
 
