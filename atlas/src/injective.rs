@@ -28,7 +28,12 @@
 //!    face joins when it can be placed, by its rest shape on an edge already placed, as a positive
 //!    triangle over no good face, whose UV-to-rest area ratio is within [`GROW_SCALE`] of the
 //!    good faces' median either way); what stays bad, and each connected piece of the good faces,
-//!    becomes a part that goes back to step 1 with the positions it had. An island with no current
+//!    becomes a part that goes back to step 1 with the positions it had, mirrored (`v` negated)
+//!    when their summed signed area is negative: a part detached because the map mirrors it
+//!    (the far side of a thin wall that one chart maps from both sides: 43% of the unruly
+//!    vase's faces) is a mirror image of a map that may be good, and is kept or mended whole
+//!    instead of being embedded anew and split (the whole island is turned the same way in
+//!    step 1). An island with no current
 //!    map to detach from, or whose faces are all bad, is cut into its pieces of consistent winding
 //!    and manifold edges or, when it is one, into two halves grown breadth-first from two far-apart
 //!    faces. A part of one face is always a disc, so the recursion ends. Without `split` an island
@@ -386,6 +391,10 @@ impl Ctx<'_> {
         placement: &Placement,
         out: &mut Vec<PartResult>,
     ) {
+        // A part detached from its island because the map mirrors it (the far side of a thin
+        // wall that one chart maps from both sides) is a mirror image of a map that may be
+        // good: mirrored back, it can be kept or mended instead of cut up and embedded anew.
+        let current = current.map(|p| patch.facing(p));
         if patch.live().next().is_none() {
             // Only collapsed faces: zero UV area whatever their UVs, nothing to solve.
             let energy = (0.0, patch.area3);
@@ -836,6 +845,12 @@ impl Patch {
         }
         let s = (total / auv).sqrt();
         Some(p.iter().map(|q| [s * q[0], s * sign * q[1]]).collect())
+    }
+
+    /// `p`, mirrored (its `v` negated) when the patch's summed signed UV area is negative.
+    fn facing(&self, p: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
+        let signed: f64 = self.live().map(|(_, c)| area2(c.map(|i| p[i as usize]))).sum();
+        if signed < 0.0 { p.into_iter().map(|q| [q[0], -q[1]]).collect() } else { p }
     }
 
     /// The injective check of the module docs.
@@ -2830,6 +2845,19 @@ mod tests {
         let r = &out.report;
         assert_eq!((r.not_injective_before, r.not_injective_after, r.not_disc), (1, 0, 1), "{r:?}");
         assert_eq!(r.islands_after, 2, "{r:?}");
+        assert_eq!(flips_and_overlaps(&out.mesh), (0, 0));
+    }
+
+    /// One projection maps a closed surface's far side mirrored under its near side, as Nuvo's
+    /// networks map the two sides of a thin wall. The far side, detached, is a mirror image of
+    /// a good map: it keeps that map mirrored back instead of being embedded anew.
+    #[test]
+    fn the_mirrored_far_side_of_a_projection_keeps_its_map() {
+        let m = projected_sphere(12, 24);
+        let out = make_injective(&m, &InjectiveOptions::default()).unwrap();
+        let r = &out.report;
+        assert_eq!((r.islands_after, r.split, r.not_injective_after), (2, 1, 0), "{r:?}");
+        assert_eq!(r.reembedded, 0, "no part needed a Tutte embedding: {r:?}");
         assert_eq!(flips_and_overlaps(&out.mesh), (0, 0));
     }
 
