@@ -364,6 +364,8 @@ struct Island {
     /// Whether a further 45° turn leaves its shear (mean |cos(T, B)|) within [`TURN_SHEAR`]:
     /// then the shape packer may lay it along a diagonal.
     diagonal: bool,
+    /// What the shape packer needs to rasterise it by its boundary (`None`: by every face).
+    outline: Option<shapes::Outline>,
 }
 
 impl Island {
@@ -399,7 +401,8 @@ impl Island {
         } else {
             (area_3d / area_uv).sqrt()
         };
-        Self { rot, min, extent, growth, degenerate, area_3d, points, tris, diagonal }
+        let outline = shapes::Outline::of(&points, &tris);
+        Self { rot, min, extent, growth, degenerate, area_3d, points, tris, diagonal, outline }
     }
 
     /// Texels per input UV unit at atlas `scale` and `res`.
