@@ -69,10 +69,9 @@
 //!   texel comes within `gutter` of another island's, turned by multiples of 45° after the
 //!   minimum-area rotation; three placement rules, `best_shapes`), by bisection on `scale` from
 //!   the rectangles' scale upwards (to 2e-4 relative), and the packing with the larger scale is
-//!   kept. The gutter then holds between
-//!   the texels the islands touch rather than between their cells, and each island keeps
-//!   `floor(gutter / 2)` texels free at the low side of each axis and `ceil(gutter / 2)` at the
-//!   high side. Measured in BENCHMARKS.md ("Shape packing"): spot's own 13 charts 0.619 → 0.696
+//!   kept. The gutter then holds between the texels the islands touch rather than between
+//!   their cells, and each island keeps `floor(gutter / 2)` texels free at the low side of
+//!   each axis and `ceil(gutter / 2)` at the high side. Measured in BENCHMARKS.md ("Shape packing"): spot's own 13 charts 0.619 → 0.696
 //!   at 1024² (gutter 2).
 //! - **Efficiency**: the summed unsigned UV area of all faces in the output (over the unit
 //!   square's area 1), as [`crate::partuv`] measures packing efficiency.
@@ -700,7 +699,8 @@ pub const SHAPES_UP_TO: usize = 500;
 /// [`Rule::Square`]) by decreasing area. Measured on the 14 Common Shapes atlases at 2048²
 /// (BENCHMARKS.md, "Three placement rules"): the two added rules took the mean efficiency from
 /// 0.582 to 0.601 for 1.4× the packing time; both rules in all three orders reached 0.603 for
-/// 2.2×.
+/// 2.2× (times before footprints came from the outline, [`shapes::Outline`], which made the
+/// whole faster than the one rule had been).
 fn best_shapes(
     islands: &[Island],
     res: u32,
