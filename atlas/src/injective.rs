@@ -33,10 +33,9 @@
 //!    (the far side of a thin wall that one chart maps from both sides: 43% of the unruly
 //!    vase's faces) is a mirror image of a map that may be good, and is kept or mended whole
 //!    instead of being embedded anew and split (the whole island is turned the same way in
-//!    step 1). An island with no current
-//!    map to detach from, or whose faces are all bad, is cut into its pieces of consistent winding
-//!    and manifold edges or, when it is one, into two halves grown breadth-first from two far-apart
-//!    faces. A part of one face is always a disc, so the recursion ends. Without `split` an island
+//!    step 1). An island with no current map to detach from, or whose faces are all bad, is cut
+//!    into its pieces of consistent winding and manifold edges or, when it is one, into two
+//!    halves grown breadth-first from two far-apart faces. A part of one face is always a disc, so the recursion ends. Without `split` an island
 //!    that is neither injective, repairable nor a disc keeps its UVs (counted as not injective).
 //! 5. **SLIM** lowers the distortion without losing injectivity (Rabinovich, Poranne, Panozzo,
 //!    Sorkine-Hornung, "Scalable Locally Injective Mappings", 2017) on the symmetric Dirichlet
@@ -829,22 +828,20 @@ impl Patch {
     /// counter-clockwise majority), `None` when they have no area.
     fn current(&self, ctx: &Ctx) -> Option<Vec<[f64; 2]>> {
         let mut p = vec![[0.0f64; 2]; self.n];
-        let mut signed = 0.0;
         for (&f, c) in self.faces.iter().zip(&self.corners) {
             let t = ctx.uv.triangles[f as usize].map(|i| ctx.uv.coords[i as usize].map(|x| x as f64));
-            signed += area2(t);
             for k in 0..3 {
                 p[c[k] as usize] = t[k];
             }
         }
-        let sign = if signed >= 0.0 { 1.0 } else { -1.0 };
+        let p = self.facing(p);
         let auv: f64 = self.live().map(|(_, c)| 0.5 * area2(c.map(|i| p[i as usize])).abs()).sum();
         let total: f64 = self.live().map(|(t, _)| self.rest[t].weight).sum();
         if !(auv > 0.0 && total > 0.0) {
             return None;
         }
         let s = (total / auv).sqrt();
-        Some(p.iter().map(|q| [s * q[0], s * sign * q[1]]).collect())
+        Some(p.iter().map(|q| [s * q[0], s * q[1]]).collect())
     }
 
     /// `p`, mirrored (its `v` negated) when the patch's summed signed UV area is negative.

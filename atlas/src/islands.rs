@@ -71,8 +71,8 @@
 //!   the rectangles' scale upwards (to 2e-4 relative), and the packing with the larger scale is
 //!   kept. The gutter then holds between the texels the islands touch rather than between
 //!   their cells, and each island keeps `floor(gutter / 2)` texels free at the low side of
-//!   each axis and `ceil(gutter / 2)` at the high side. Measured in BENCHMARKS.md ("Shape packing"): spot's own 13 charts 0.619 → 0.696
-//!   at 1024² (gutter 2).
+//!   each axis and `ceil(gutter / 2)` at the high side. Measured in BENCHMARKS.md ("Shape
+//!   packing"): spot's own 13 charts 0.619 → 0.696 at 1024² (gutter 2).
 //! - **Efficiency**: the summed unsigned UV area of all faces in the output (over the unit
 //!   square's area 1), as [`crate::partuv`] measures packing efficiency.
 //!
@@ -321,7 +321,12 @@ impl Layout {
                 let points: Vec<[f64; 2]> =
                     members[i].iter().map(|&c| uv.coords[c as usize].map(|x| x as f64)).collect();
                 let degenerate = !(area_3d[i] > eps_3d && area_uv[i] > eps_uv);
-                Island::new(&points, tris, &metric, area_uv[i], area_3d[i], degenerate, rotate)
+                let mut island =
+                    Island::new(&points, tris, &metric, area_uv[i], area_3d[i], degenerate, rotate);
+                if n <= SHAPES_UP_TO {
+                    island.outline = shapes::Outline::of(&island.points, &island.tris);
+                }
+                island
             })
             .collect();
         Self { islands, coords, triangles }
@@ -363,7 +368,9 @@ struct Island {
     /// Whether a further 45° turn leaves its shear (mean |cos(T, B)|) within [`TURN_SHEAR`]:
     /// then the shape packer may lay it along a diagonal.
     diagonal: bool,
-    /// What the shape packer needs to rasterise it by its boundary (`None`: by every face).
+    /// What the shape packer needs to rasterise it by its boundary (`None`: by every face, or
+    /// not packed by its shape at all: [`Layout::of`] finds it only up to [`SHAPES_UP_TO`]
+    /// islands).
     outline: Option<shapes::Outline>,
 }
 
@@ -400,8 +407,7 @@ impl Island {
         } else {
             (area_3d / area_uv).sqrt()
         };
-        let outline = shapes::Outline::of(&points, &tris);
-        Self { rot, min, extent, growth, degenerate, area_3d, points, tris, diagonal, outline }
+        Self { rot, min, extent, growth, degenerate, area_3d, points, tris, diagonal, outline: None }
     }
 
     /// Texels per input UV unit at atlas `scale` and `res`.

@@ -46,9 +46,12 @@
 //! Deterministic: orientations are searched in parallel (rayon) but chosen by the fixed order
 //! above, islands are placed sequentially.
 
+use std::collections::HashMap;
+
 use rayon::prelude::*;
 
 use super::{Island, rotated};
+use crate::refine::area2;
 
 /// One island's footprint in one orientation at one scale.
 #[derive(Clone, Debug)]
@@ -117,15 +120,11 @@ impl Outline {
     /// The outline of the faces `tris` over `points`; `None` when a face has negative signed
     /// area (then the winding number no longer counts the faces over a point).
     pub(super) fn of(points: &[[f64; 2]], tris: &[[u32; 3]]) -> Option<Outline> {
-        let area2 = |t: &[u32; 3]| {
-            let [a, b, c] = t.map(|i| points[i as usize]);
-            (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
-        };
-        if tris.iter().any(|t| area2(t) < 0.0) {
+        if tris.iter().any(|t| area2(t.map(|i| points[i as usize])) < 0.0) {
             return None;
         }
         // Net count of each undirected edge, positive in the direction from the lower index.
-        let mut net: std::collections::HashMap<(u32, u32), i64> = std::collections::HashMap::new();
+        let mut net: HashMap<(u32, u32), i64> = HashMap::new();
         let mut order: Vec<(u32, u32)> = Vec::new();
         for t in tris {
             for k in 0..3 {
@@ -333,12 +332,6 @@ impl Rule {
             Rule::Square => (right.max(top), top, x),
         }
     }
-
-    /// A lower bound of `key(fp, x', y').0` over every `x' ≥ x`, `y' ≥ y`: every rule's first
-    /// component never falls as `x` or `y` grows, so it is its own value at `(x, y)`.
-    fn floor(self, fp: &Footprint, x: u32, y: u32) -> u32 {
-        self.key(fp, x, y).0
-    }
 }
 
 /// The atlas bitmap: one bit per texel, set where the texel is occupied (module docs).
@@ -416,9 +409,10 @@ impl Occupancy {
         let need: Vec<u32> =
             fp.rows.iter().map(|r| r.iter().map(|&(a, b)| b - a + 1).max().unwrap_or(0)).collect();
         let mut best: Option<(Key, u32, u32)> = None;
-        // No position at (x', y') with x' ≥ x, y' ≥ y ranks before `best`.
+        // No position at (x', y') with x' ≥ x, y' ≥ y ranks before `best`: every rule's first
+        // key component never falls as `x` or `y` grows.
         let beaten = |best: &Option<(Key, u32, u32)>, x: u32, y: u32| {
-            best.is_some_and(|(k, ..)| rule.floor(fp, x, y) > k.0)
+            best.is_some_and(|(k, ..)| rule.key(fp, x, y).0 > k.0)
         };
         let mut last = 0usize; // the footprint row that blocked last: tried first
         for y in 0..=self.side - fp.h {
@@ -634,22 +628,27 @@ mod tests {
         assert_eq!(fp.rows, vec![vec![(0, 3)]]);
     }
 
+    /// Where `rule` places `fp` in `o`.
+    fn fit_at(o: &Occupancy, fp: &Footprint, rule: Rule) -> Option<(u32, u32)> {
+        o.best_fit(fp, rule).map(|(_, x, y)| (x, y))
+    }
+
     #[test]
     fn fits_skip_occupied_runs_and_respect_border_and_gutter() {
         let fp = footprint(&square_island(1.0), 0, 3.0);
         let mut o = Occupancy::new(10, 2);
         // Border strips of one texel on every side: the first fit is (1, 1).
-        assert_eq!(o.best_fit(&fp, Rule::LowestTop).map(|(_, x, y)| (x, y)), Some((1, 1)));
+        assert_eq!(fit_at(&o, &fp, Rule::LowestTop), Some((1, 1)));
         o.occupy(&fp, 1, 1, 2);
         // Dilated by 2, the square blocks columns and rows 0..=5: next to it from x = 6, and a
         // 3-wide footprint needs columns 6..=8 (column 9 is border).
-        assert_eq!(o.best_fit(&fp, Rule::LowestTop).map(|(_, x, y)| (x, y)), Some((6, 1)));
+        assert_eq!(fit_at(&o, &fp, Rule::LowestTop), Some((6, 1)));
         o.occupy(&fp, 6, 1, 2);
-        assert_eq!(o.best_fit(&fp, Rule::LowestTop).map(|(_, x, y)| (x, y)), Some((1, 6)));
+        assert_eq!(fit_at(&o, &fp, Rule::LowestTop), Some((1, 6)));
         o.occupy(&fp, 1, 6, 2);
-        assert_eq!(o.best_fit(&fp, Rule::LowestTop).map(|(_, x, y)| (x, y)), Some((6, 6)));
+        assert_eq!(fit_at(&o, &fp, Rule::LowestTop), Some((6, 6)));
         o.occupy(&fp, 6, 6, 2);
-        assert_eq!(o.best_fit(&fp, Rule::LowestTop).map(|(_, x, y)| (x, y)), None);
+        assert_eq!(fit_at(&o, &fp, Rule::LowestTop), None);
     }
 
     /// An occupancy of `side²` without border or gutter, with `blocked[y]` texels occupied from
@@ -667,22 +666,21 @@ mod tests {
 
     #[test]
     fn each_rule_takes_the_position_its_key_ranks_first() {
-        let at = |o: &Occupancy, fp: &Footprint, rule| o.best_fit(fp, rule).map(|(_, x, y)| (x, y));
         // A 6 × 2 block in the corner; a 3 × 3 square fits right of it on the floor (top 3,
         // far corner (9, 3)) or on top of it at the left (top 5, far corner (3, 5)).
         let o = blocked_from_left(10, &[6, 6]);
         let fp = footprint(&square_island(1.0), 0, 3.0);
-        assert_eq!(at(&o, &fp, Rule::LowestTop), Some((6, 0)));
-        assert_eq!(at(&o, &fp, Rule::Corner), Some((0, 2)));
-        assert_eq!(at(&o, &fp, Rule::Square), Some((0, 2)));
+        assert_eq!(fit_at(&o, &fp, Rule::LowestTop), Some((6, 0)));
+        assert_eq!(fit_at(&o, &fp, Rule::Corner), Some((0, 2)));
+        assert_eq!(fit_at(&o, &fp, Rule::Square), Some((0, 2)));
         // A one-texel island: row 0 is free from x = 6 (far corner (7, 1): sum 8, larger side
         // 7), rows 1–3 from x = 7, row 4 from x = 3 (far corner (4, 5): sum 9, larger side 5),
         // the rows above are full.
         let o = blocked_from_left(10, &[6, 7, 7, 7, 3, 10, 10, 10, 10, 10]);
         let fp = footprint(&square_island(1.0), 0, 1.0);
-        assert_eq!(at(&o, &fp, Rule::LowestTop), Some((6, 0)));
-        assert_eq!(at(&o, &fp, Rule::Corner), Some((6, 0)));
-        assert_eq!(at(&o, &fp, Rule::Square), Some((3, 4)));
+        assert_eq!(fit_at(&o, &fp, Rule::LowestTop), Some((6, 0)));
+        assert_eq!(fit_at(&o, &fp, Rule::Corner), Some((6, 0)));
+        assert_eq!(fit_at(&o, &fp, Rule::Square), Some((3, 4)));
     }
 
     #[test]
