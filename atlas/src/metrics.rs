@@ -47,7 +47,7 @@ use crate::geom::to_dvec3;
 use crate::partuv::{PartUvMetrics, partuv_metrics};
 use crate::render::{GBuffer, render};
 use crate::uvstats::{
-    DEFAULT_UV_RASTER, DEGENERATE_UV_AREA, UvStats, analyse_uv, degenerate_3d_faces, require_uv,
+    DEFAULT_UV_RASTER, DEGENERATE_UV_AREA, UvStats, analyse_uv, degenerate_3d_faces, require_uv, uv_charts,
 };
 
 /// Options of [`evaluate`]. `Default` gives the documented defaults.
@@ -196,12 +196,55 @@ pub fn image_metrics(
     let mut per_view = Vec::with_capacity(cameras.len());
     for cam in cameras {
         let g = render(mesh, cam)?;
-        if let Some(s) = view_scores(uv, &faces, &g, params) {
+        if let Some(s) = view_scores(uv, &faces, None, &g, params) {
             per_view.push(s);
         }
     }
+    summarize_views(per_view, cameras.len())
+}
+
+/// The Editability that each of `layouts` (UV layers of one mesh: the same positions and faces)
+/// would score once its islands are packed apart, from one rendering of each view: a pixel is a
+/// boundary pixel also where its neighbour sees another island (of
+/// [`crate::uvstats::uv_charts`]), whatever their UV distance now. Islands that a pass leaves on
+/// top of each other (the parts of a cut, before packing) then count as the seams they will be.
+/// The packer may still set two islands side by side across a seam closer than `uv_jump`, which
+/// the measured score would not count: so this is an estimate, at most the measured score, for
+/// comparing layouts before packing. Errors: a layout whose faces differ from `mesh`'s, no UVs,
+/// nothing visible.
+pub fn unpacked_editability(
+    mesh: &TriMesh,
+    layouts: &[&TriMesh],
+    cameras: &[Camera],
+    params: &ImageParams,
+) -> Result<Vec<f64>, AtlasError> {
+    params.check()?;
+    // Per layout: its UVs, each face's distortion, each face's island.
+    type Scored<'a> = (&'a UvLayer, Vec<Option<[f32; 2]>>, Vec<u32>);
+    let scored: Vec<Scored> = layouts
+        .iter()
+        .map(|m| {
+            if m.triangles != mesh.triangles || m.positions != mesh.positions {
+                return Err(AtlasError::invalid("layouts", "a layout's mesh differs from the one rendered"));
+            }
+            let uv = require_uv(m)?;
+            Ok((uv, face_distortion(m, uv), uv_charts(m, uv).0))
+        })
+        .collect::<Result<_, _>>()?;
+    let mut per_view: Vec<Vec<ViewScores>> = vec![Vec::with_capacity(cameras.len()); layouts.len()];
+    for cam in cameras {
+        let g = render(mesh, cam)?;
+        for ((uv, faces, islands), views) in scored.iter().zip(&mut per_view) {
+            views.extend(view_scores(uv, faces, Some(islands), &g, params));
+        }
+    }
+    per_view.into_iter().map(|v| Ok(summarize_views(v, cameras.len())?.editability)).collect()
+}
+
+/// The means over the measured views (module docs), or [`AtlasError::NothingVisible`].
+fn summarize_views(per_view: Vec<ViewScores>, cameras: usize) -> Result<ImageMetrics, AtlasError> {
     if per_view.is_empty() {
-        return Err(AtlasError::NothingVisible { views: cameras.len() });
+        return Err(AtlasError::NothingVisible { views: cameras });
     }
     let mean = |f: fn(&ViewScores) -> f64| per_view.iter().map(f).sum::<f64>() / per_view.len() as f64;
     Ok(ImageMetrics {
@@ -269,10 +312,13 @@ pub(crate) fn abs_cos_tangents(e1: DVec3, e2: DVec3, duv: [f64; 4]) -> Option<f6
     (den > 0.0).then(|| (t.dot(bt) / den).abs().min(1.0))
 }
 
-/// The scores of one rendered view, `None` when it has no measurable pixel.
+/// The scores of one rendered view, `None` when it has no measurable pixel. With `islands` (one
+/// label per face), neighbours that see faces of different islands are on a boundary whatever
+/// their UV distance ([`unpacked_editability`]).
 fn view_scores(
     uv: &UvLayer,
     faces: &[Option<[f32; 2]>],
+    islands: Option<&[u32]>,
     g: &GBuffer,
     params: &ImageParams,
 ) -> Option<ViewScores> {
@@ -296,7 +342,11 @@ fn view_scores(
         }
         let discontinuous = (p.depth - q.depth).abs() > params.depth_jump * p.depth.min(q.depth);
         let d = [uvp[i][0] - uvp[j][0], uvp[i][1] - uvp[j][1]];
-        !discontinuous && d[0] * d[0] + d[1] * d[1] > jump2
+        let apart = islands.is_some_and(|l| match (p.hit(), q.hit()) {
+            (Some(a), Some(b)) => l[a as usize] != l[b as usize],
+            _ => false,
+        });
+        !discontinuous && (apart || d[0] * d[0] + d[1] * d[1] > jump2)
     };
     let (hits, boundary_pixels) = (0..h)
         .into_par_iter()
@@ -379,6 +429,26 @@ mod tests {
             assert_close(name, v, 1.0, 1e-4);
         }
         assert_close("editability", r.editability, 1.0, 1e-4);
+    }
+
+    #[test]
+    fn unpacked_editability_counts_a_seam_between_islands_however_close_they_lie() {
+        // Head-on 200² over [-1, 1]²: the seam x = 0 falls between pixel columns 99 and 100. The
+        // left half moved 0.05 in u is an island of its own, closer than `uv_jump` to the right
+        // half: measured, no pixel is a boundary pixel; unpacked, both columns along the seam
+        // are (400 of 40,000 pixels), and Stretch and Conformal stay 1.
+        let m = grid(10, |p| [(p[0] + 1.0) * 0.5, (p[1] + 1.0) * 0.5]);
+        let halves = with_uv_per_corner(&m, |f, _, uv| {
+            let left = m.corners(f).iter().all(|c| c[0] <= 0.0);
+            if left { [uv[0] + 0.05, uv[1]] } else { uv }
+        });
+        let params = ImageParams::default();
+        assert_close("measured", image_metrics(&halves, &head_on(), &params).unwrap().editability, 1.0, 1e-9);
+        let got = unpacked_editability(&halves, &[&m, &halves], &head_on(), &params).unwrap();
+        assert_close("one island", got[0], 1.0, 1e-9);
+        assert_close("two islands", got[1], 1.0 - 400.0 / 40_000.0, 1e-9);
+        let other = grid(9, |p| [p[0], p[1]]);
+        assert!(unpacked_editability(&halves, &[&other], &head_on(), &params).is_err());
     }
 
     #[test]

@@ -44,6 +44,15 @@
 //!   mesh's faces reach [`NeckOptions::max_face_attempts`] (an attempt turns and rasterises
 //!   every face; a probe cut short keeps the scale proven so far); the parts of a cut are
 //!   islands that may be cut again.
+//! - **Judgement** ([`judge_cuts`], run by the caller after it relaxed the parts): the cuts of
+//!   the pass are kept only when the Editability that the layout will score once packed,
+//!   estimated from one rendering of [`JUDGE_VIEWS`] with every edge between two islands a seam
+//!   ([`crate::metrics::unpacked_editability`]), falls by at most
+//!   [`NeckOptions::editability_per_packing`] times `ln(efficiency_after / efficiency_before)`;
+//!   otherwise all are undone. The seam term above prices a seam by its length against the
+//!   surface's size; what a seam costs in the renders also depends on how much of each view the
+//!   surface fills, and whether the parts' relaxing pays it back (the docs of
+//!   [`EDITABILITY_PER_PACKING`]).
 //! - **Many islands**: a layout of more than [`SHAPES_UP_TO`] islands (a marching-cubes mesh's
 //!   floaters and crumbs) is left as it is. There [`pack_islands`] packs rectangles, a trial
 //!   costs seconds, and no cut moves the packing: on an unruly bunny's density grid (3,815
@@ -59,6 +68,7 @@ use std::collections::{HashMap, HashSet};
 use nuvo_geometry::{TriMesh, UvLayer};
 use serde::Serialize;
 
+use crate::camera::orbit_views;
 use crate::error::AtlasError;
 use crate::geom::to_dvec3;
 use crate::injective::{path_back, shortest_paths};
@@ -66,6 +76,7 @@ use crate::islands::{
     IslandPacking, SHAPES_UP_TO, ScaleTest, convex_hull, min_area_rotation, pack_islands, packs_at_scale,
     rotated,
 };
+use crate::metrics::{ImageParams, unpacked_editability};
 use crate::partuv::face_areas_3d;
 use crate::refine::island_unknowns;
 use crate::uvstats::{Dsu, face_uv_area2, faces_by_edge, require_uv, uv_charts, uv_islands};
@@ -102,6 +113,9 @@ pub struct NeckOptions {
     /// Packing attempts (trials and probes) times the mesh's faces at most (default 2e6: 20
     /// attempts of 0.1–0.15 s each on a 97k-face horse, the whole pass on a 6k-face cow).
     pub max_face_attempts: usize,
+    /// The Editability that the cuts may cost per unit of the log of the packing efficiency's
+    /// rise, judged by [`judge_cuts`] (default [`EDITABILITY_PER_PACKING`]).
+    pub editability_per_packing: f64,
 }
 
 impl Default for NeckOptions {
@@ -114,9 +128,27 @@ impl Default for NeckOptions {
             seam_cost: 0.25,
             max_failures: 3,
             max_face_attempts: 2_000_000,
+            editability_per_packing: EDITABILITY_PER_PACKING,
         }
     }
 }
+
+/// Editability (the paper's metric) that the neck cuts may cost per unit of `ln(e_after /
+/// e_before)` of the packing efficiency: one point (0.01) for a rise by `e^0.5 ≈ 1.65`. The seam
+/// term of a trial counts a seam by its length relative to the surface, which is what the renders
+/// see of a seam on a compact shape; on a flat or long one (woody, a flat figure, R²/A = 1.0; the
+/// alligator 3.0; the other Common Shapes 0.24–0.49, `R` the bounding sphere's radius, which the
+/// views frame) a seam covers several times more of each view, and the isometric parts gain
+/// nothing from relaxing. Measured there: woody's two cuts cost 0.0101 for a rise 1.30 (its
+/// Editability then 0.9898 against xatlas's 1.0000 with one chart), the alligator's two 0.0089
+/// for 3.3 (0.9910 against xatlas's 0.9485). On the curved shapes the cuts' relaxation paid for
+/// their seams (Editability +0.0002 to +0.004).
+pub const EDITABILITY_PER_PACKING: f64 = 0.02;
+
+/// Views with which [`judge_cuts`] renders the mesh: as many and as large as the evaluation's
+/// ([`crate::metrics::EvalOptions`]) but from other directions (seed 1, not 0), so that the
+/// choice is not made on the very views that score it.
+pub const JUDGE_VIEWS: (usize, u64, u32) = (16, 1, 800);
 
 /// What [`cut_necks`] did.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
@@ -136,6 +168,12 @@ pub struct NeckReport {
     pub seam_added: f64,
     /// Not run: the layout has more than [`SHAPES_UP_TO`] islands (module docs).
     pub skipped: bool,
+    /// The Editability estimated before and after the cuts ([`judge_cuts`]; `None` when no
+    /// cut was made or none was judged).
+    pub editability: Option<[f64; 2]>,
+    /// The cuts were undone by [`judge_cuts`]: they cost more Editability than their packing
+    /// was worth.
+    pub undone: bool,
 }
 
 /// The mesh with its islands cut and what was done.
@@ -228,6 +266,32 @@ pub fn cut_necks(mesh: &TriMesh, opts: &NeckOptions) -> Result<Necked, AtlasErro
     }
     report.efficiency_after = efficiency;
     Ok(Necked { mesh: current, report })
+}
+
+/// Whether the cuts that turned `before` into `after` (the same mesh with the layout of
+/// [`cut_necks`], relaxed or not) are worth their seams: kept when the Editability that `after`
+/// will score once packed, estimated by [`unpacked_editability`] over [`JUDGE_VIEWS`], is at
+/// least `before`'s less [`NeckOptions::editability_per_packing`] times the log of the packing
+/// rise that `report` measured. Records the estimates and the verdict in `report`. Errors: the
+/// meshes differ in positions or faces, no UVs.
+pub fn judge_cuts(
+    before: &TriMesh,
+    after: &TriMesh,
+    opts: &NeckOptions,
+    report: &mut NeckReport,
+) -> Result<bool, AtlasError> {
+    if report.cuts == 0 || report.efficiency_before <= 0.0 {
+        return Ok(true);
+    }
+    let Some(bounds) = before.bounds() else { return Ok(true) };
+    let (count, seed, side) = JUDGE_VIEWS;
+    let cameras = orbit_views(&bounds, count, seed, side, side);
+    let e = unpacked_editability(before, &[before, after], &cameras, &ImageParams::default())?;
+    let rise = (report.efficiency_after / report.efficiency_before).max(1.0);
+    let keep = e[1] >= e[0] - opts.editability_per_packing * rise.ln();
+    report.editability = Some([e[0], e[1]]);
+    report.undone = !keep;
+    Ok(keep)
 }
 
 /// The island's minimum-area bounding rectangle's area minus its UV area, in units of 3-D area
@@ -516,6 +580,35 @@ mod tests {
         let uv = out.mesh.uv.as_ref().unwrap();
         assert_eq!(uv_charts(&out.mesh, uv).1, out.report.cuts + 1);
         assert!(out.report.seam_added > 0.0);
+    }
+
+    #[test]
+    fn cuts_are_undone_when_their_seams_cost_more_editability_than_the_packing_is_worth() {
+        // A flat strip mapped by its own xy into the unit square: one island scores
+        // Editability 1; the cut's seam costs some, which the rise in packing pays at a high
+        // exchange rate but not at zero.
+        let mut mesh = shape(32, 4, 8.0, 1.0, |_, _| true);
+        for c in &mut mesh.uv.as_mut().unwrap().coords {
+            *c = c.map(|x| x / 8.0);
+        }
+        let out = cut_necks(&mesh, &NeckOptions::default()).unwrap();
+        assert!(out.report.cuts >= 1, "{:?}", out.report);
+        let judge = |rate: f64| {
+            let mut report = out.report.clone();
+            let opts = NeckOptions { editability_per_packing: rate, ..Default::default() };
+            (judge_cuts(&mesh, &out.mesh, &opts, &mut report).unwrap(), report)
+        };
+        let (keep, report) = judge(0.0);
+        assert!(!keep && report.undone);
+        let [before, after] = report.editability.unwrap();
+        assert!((before - 1.0).abs() < 1e-4, "one isometric island: {before}");
+        assert!(after < before - 1e-4, "the seam is counted: {after}");
+        let (keep, report) = judge(1.0);
+        assert!(keep && !report.undone, "{report:?}");
+        // No cut: nothing to judge.
+        let mut none = NeckReport::default();
+        assert!(judge_cuts(&mesh, &mesh, &NeckOptions::default(), &mut none).unwrap());
+        assert_eq!(none.editability, None);
     }
 
     #[test]

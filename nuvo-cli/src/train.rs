@@ -245,8 +245,19 @@ fn print_report(report: &OutputReport, seconds: f64) {
         }
         if let Some(n) = m.layout.necks.as_ref().filter(|n| !n.skipped) {
             println!(
-                "       islands cut at their necks: {} (packing efficiency at 512²: {:.3} -> {:.3}; {} trials)",
-                n.cuts, n.efficiency_before, n.efficiency_after, n.trials
+                "       islands cut at their necks: {} (packing efficiency at 512²: {:.3} -> {:.3}; {} trials){}",
+                n.cuts,
+                n.efficiency_before,
+                n.efficiency_after,
+                n.trials,
+                match n.editability {
+                    Some([a, b]) if n.undone => format!(
+                        "; undone: they cost {:.4} of Editability (estimated {a:.4} -> {b:.4}), more than the packing is worth",
+                        a - b
+                    ),
+                    Some([a, b]) => format!("; Editability estimated {a:.4} -> {b:.4}"),
+                    None => String::new(),
+                }
             );
         }
     }

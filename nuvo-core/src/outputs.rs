@@ -38,7 +38,7 @@ use nuvo_atlas::injective::{InjectiveOptions, InjectiveReport, make_injective};
 use nuvo_atlas::islands::{IslandPacking, pack_islands};
 use nuvo_atlas::join::{JoinOptions, JoinReport, join_small_islands};
 use nuvo_atlas::metrics::{EvalOptions, Metrics, evaluate};
-use nuvo_atlas::necks::{NeckOptions, NeckReport, cut_necks};
+use nuvo_atlas::necks::{NeckOptions, NeckReport, cut_necks, judge_cuts};
 use nuvo_atlas::pack::AtlasLayout;
 use nuvo_atlas::pictures::{
     ChartGrid, chart_grid_image, checkerboard, pack_images, png_bytes, render_textured, uv_layout, write_png,
@@ -198,12 +198,18 @@ fn finish_layout(
         phases.done("join");
     }
     if opts.packing == Packing::Islands && opts.cut_necks {
-        let necked = cut_necks(&mesh, &NeckOptions::default())?;
-        mesh = necked.mesh;
-        if necked.report.cuts > 0 && opts.injective {
-            // A cut frees the parts' boundary where they were joined: SLIM relaxes them from
-            // their maps (the other islands are already converged and stop after one round).
-            mesh = make_injective(&mesh, &injective_options(opts))?.mesh;
+        let neck_options = NeckOptions::default();
+        let mut necked = cut_necks(&mesh, &neck_options)?;
+        if necked.report.cuts > 0 {
+            let mut cut = necked.mesh;
+            if opts.injective {
+                // A cut frees the parts' boundary where they were joined: SLIM relaxes them from
+                // their maps (the other islands are already converged and stop after one round).
+                cut = make_injective(&cut, &injective_options(opts))?.mesh;
+            }
+            if judge_cuts(&mesh, &cut, &neck_options, &mut necked.report)? {
+                mesh = cut;
+            }
         }
         summary.necks = Some(necked.report);
         phases.done("necks");
