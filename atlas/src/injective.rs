@@ -154,6 +154,11 @@ pub const WEIGHT_SIGMA_FLOOR: f64 = 1e-3;
 /// `tolerance` does.
 pub const EXCESS_TOLERANCE: f64 = 1e-2;
 
+/// Angle deficit (radians) within which every inner vertex of a developable patch lies: far
+/// above the rounding of angles summed from `f32` positions, far below any surface's curvature
+/// at a vertex.
+pub const DEVELOPABLE_DEFICIT: f64 = 1e-5;
+
 /// Rings of faces round the bad faces that `Patch::repair` tries in turn.
 pub const REPAIR_RINGS: &[usize] = &[1, 2, 4, 8];
 /// The scaffold's box extends this many times the boundary's larger side beyond it.
@@ -426,7 +431,14 @@ impl Ctx<'_> {
         }
         if let Some(p) = &current {
             if patch.is_injective(p) {
-                return self.finish(patch, p.clone(), Start::Input, out, placement);
+                // A developable disc's conformal map is an isometry, the optimum that SLIM from
+                // the map given only creeps towards (woody, flat: 0.99999 of Stretch and
+                // Conformal after 60 rounds).
+                let start = match patch.is_developable_disc().then(|| patch.lscm()).flatten() {
+                    Some(q) if patch.is_injective(&q) => q,
+                    _ => p.clone(),
+                };
+                return self.finish(patch, start, Start::Input, out, placement);
             }
             if let Some(q) = patch.repair(p) {
                 return self.finish(patch, q, Start::Repaired, out, placement);
@@ -1456,7 +1468,9 @@ impl Patch {
 
     /// The cone points of this disc (module docs, step 6), strongest first; `adj` is its
     /// [`Patch::edge_graph`].
-    fn cone_points(&self, adj: &Adjacency) -> Vec<u32> {
+    /// Per unknown, its angle deficit: 2π minus the rest angles of its faces; 0 on the boundary
+    /// and where a face without 3-D area touches (whose rest angles are made up).
+    fn deficits(&self) -> Vec<f64> {
         let n = self.n;
         // Angle sums of the faces with a true 3-D area round each unknown; unknowns on the
         // boundary, or touching a face without 3-D area (whose rest angles are made up), have no
@@ -1474,8 +1488,18 @@ impl Patch {
                 angle[c[k] as usize] += corner_angle(x, k);
             }
         }
-        let deficit: Vec<f64> =
-            (0..n).map(|v| if usable[v] { std::f64::consts::TAU - angle[v] } else { 0.0 }).collect();
+        (0..n).map(|v| if usable[v] { std::f64::consts::TAU - angle[v] } else { 0.0 }).collect()
+    }
+
+    /// Whether the patch is a developable disc: every inner angle deficit within
+    /// [`DEVELOPABLE_DEFICIT`]. Its least-squares conformal map is then an isometry.
+    fn is_developable_disc(&self) -> bool {
+        self.topology.disc && self.deficits().iter().all(|d| d.abs() <= DEVELOPABLE_DEFICIT)
+    }
+
+    fn cone_points(&self, adj: &Adjacency) -> Vec<u32> {
+        let n = self.n;
+        let deficit = self.deficits();
         let radius = CONE_RADIUS * self.area3.sqrt();
         let boundary: Vec<u32> = (0..n as u32).filter(|&v| self.topology.on_boundary[v as usize]).collect();
         let (to_boundary, _, _) = shortest_paths(adj, &boundary, |_| false, |_| true);
@@ -2704,6 +2728,26 @@ mod tests {
         let r = &out.report;
         assert_eq!((r.reembedded, r.not_injective_after, r.split), (1, 0, 0), "{r:?}");
         assert!((r.energy_after - 4.0).abs() < 1e-9 && r.rounds <= 3, "{r:?}");
+        // Injective but distorted, the flat strip starts from its conformal map too (it is
+        // developable), and ends exactly isometric. The bent strip is developable too; a cone is
+        // not.
+        let sheared =
+            crate::testmesh::with_uv_per_corner(&flat, |_, _, uv| [uv[0] + 0.05 * uv[1] * uv[1], uv[1]]);
+        let r = make_injective(&sheared, &InjectiveOptions::default()).unwrap().report;
+        assert_eq!((r.not_injective_before, r.reembedded), (0, 0), "{r:?}");
+        assert!(
+            r.energy_before > 4.0 + 1e-6 && (r.energy_after - 4.0).abs() < 1e-9 && r.rounds <= 3,
+            "{r:?}"
+        );
+        let ctx_of = |m: &TriMesh| {
+            let uv = m.uv.as_ref().unwrap();
+            let degenerate = degenerate_3d_faces(m);
+            let opts = InjectiveOptions::default();
+            let ctx = Ctx { mesh: m, uv, degenerate: &degenerate, opts: &opts };
+            let faces: Vec<u32> = (0..m.triangles.len() as u32).collect();
+            Patch::new(&ctx, &faces).is_developable_disc()
+        };
+        assert!(ctx_of(&flat) && ctx_of(&bent) && !ctx_of(&cone(6, 1.0)));
     }
 
     /// The global step refilled into a kept pattern (the scaffold kept, its rest shapes taken
