@@ -208,10 +208,10 @@ pub fn image_metrics(
 /// boundary pixel also where its neighbour sees another island (of
 /// [`crate::uvstats::uv_charts`]), whatever their UV distance now. Islands that a pass leaves on
 /// top of each other (the parts of a cut, before packing) then count as the seams they will be.
-/// The packer may still set two islands side by side across a seam closer than `uv_jump`, which
-/// the measured score would not count: so this is an estimate, at most the measured score, for
-/// comparing layouts before packing. Errors: a layout whose faces differ from `mesh`'s, no UVs,
-/// nothing visible.
+/// It is an estimate, for comparing layouts before packing: the packer may still set two islands
+/// side by side across a seam closer than `uv_jump`, which the measured score would not count,
+/// and Stretch is taken at the islands' texel densities as they are, which packing makes one.
+/// Errors: a layout whose faces differ from `mesh`'s, no UVs, nothing visible.
 pub fn unpacked_editability(
     mesh: &TriMesh,
     layouts: &[&TriMesh],

@@ -162,7 +162,8 @@ pub struct NeckReport {
     /// The packing efficiency before, at [`NeckOptions::packing`] (0 when skipped).
     pub efficiency_before: f64,
     /// The same after: the efficiency proven by the last kept cut's probes (to [`PROBE_STEP`]
-    /// below the packer's own), before any later relaxing of the parts.
+    /// below the packer's own), before any later relaxing of the parts, and whether or not
+    /// [`judge_cuts`] then undid the cuts (`undone`).
     pub efficiency_after: f64,
     /// Summed 3-D length of the cuts kept.
     pub seam_added: f64,
