@@ -956,11 +956,8 @@ impl Patch {
         Some(e)
     }
 
-    /// The Tutte embedding (module docs); `None` for a patch that is not a disc or whose system
-    /// cannot be factored.
-    fn tutte(&self) -> Option<Vec<[f64; 2]>> {
-        let boundary = self.topology.loops.first().filter(|_| self.topology.disc)?;
-        // Boundary on a circle of the patch's rest area, by rest arc length.
+    /// The rest length of each edge of a boundary `loop_` (from each unknown to the next).
+    fn rest_arcs(&self, loop_: &[u32]) -> Vec<f64> {
         let mut lengths: HashMap<(u32, u32), f64> = HashMap::new();
         for (t, c) in self.live() {
             for k in 0..3 {
@@ -968,9 +965,17 @@ impl Patch {
                 lengths.insert((c[k], c[(k + 1) % 3]), (b[0] - a[0]).hypot(b[1] - a[1]));
             }
         }
-        let arcs: Vec<f64> = (0..boundary.len())
-            .map(|i| lengths[&(boundary[i], boundary[(i + 1) % boundary.len()])].max(f64::MIN_POSITIVE))
-            .collect();
+        (0..loop_.len())
+            .map(|i| lengths.get(&(loop_[i], loop_[(i + 1) % loop_.len()])).copied().unwrap_or(0.0))
+            .collect()
+    }
+
+    /// The Tutte embedding (module docs); `None` for a patch that is not a disc or whose system
+    /// cannot be factored.
+    fn tutte(&self) -> Option<Vec<[f64; 2]>> {
+        let boundary = self.topology.loops.first().filter(|_| self.topology.disc)?;
+        // Boundary on a circle of the patch's rest area, by rest arc length.
+        let arcs: Vec<f64> = self.rest_arcs(boundary).into_iter().map(|a| a.max(f64::MIN_POSITIVE)).collect();
         let perimeter: f64 = arcs.iter().sum();
         let total: f64 = self.live().map(|(t, _)| self.rest[t].weight).sum();
         let radius = (total.max(f64::MIN_POSITIVE) / std::f64::consts::PI).sqrt();
@@ -996,16 +1001,7 @@ impl Patch {
     /// `None` when the patch is not a disc or the system cannot be solved.
     fn lscm(&self) -> Option<Vec<[f64; 2]>> {
         let boundary = self.topology.loops.first().filter(|_| self.topology.disc)?;
-        let mut lengths: HashMap<(u32, u32), f64> = HashMap::new();
-        for (t, c) in self.live() {
-            for k in 0..3 {
-                let (a, b) = (self.rest[t].x[k], self.rest[t].x[(k + 1) % 3]);
-                lengths.insert((c[k], c[(k + 1) % 3]), (b[0] - a[0]).hypot(b[1] - a[1]));
-            }
-        }
-        let arcs: Vec<f64> = (0..boundary.len())
-            .map(|i| lengths.get(&(boundary[i], boundary[(i + 1) % boundary.len()])).copied().unwrap_or(0.0))
-            .collect();
+        let arcs = self.rest_arcs(boundary);
         let perimeter: f64 = arcs.iter().sum();
         let (mut s, mut half) = (0.0, 0);
         while half + 1 < boundary.len() && s + arcs[half] <= 0.5 * perimeter {
