@@ -2699,16 +2699,12 @@ mod tests {
     #[test]
     fn the_conformal_start_of_a_developable_patch_is_an_isometry() {
         let energy_density = |m: &TriMesh| {
-            let uv = m.uv.as_ref().unwrap();
-            let degenerate = degenerate_3d_faces(m);
-            let opts = InjectiveOptions::default();
-            let ctx = Ctx { mesh: m, uv, degenerate: &degenerate, opts: &opts };
-            let faces: Vec<u32> = (0..m.triangles.len() as u32).collect();
-            let patch = Patch::new(&ctx, &faces);
-            let lscm = patch.lscm().unwrap();
-            assert!(patch.is_injective(&lscm));
-            let per_area = |p: &[[f64; 2]]| patch.energy(p).unwrap() / patch.area3;
-            (per_area(&lscm), per_area(&patch.tutte().unwrap()))
+            whole_patch(m, |patch| {
+                let lscm = patch.lscm().unwrap();
+                assert!(patch.is_injective(&lscm));
+                let per_area = |p: &[[f64; 2]]| patch.energy(p).unwrap() / patch.area3;
+                (per_area(&lscm), per_area(&patch.tutte().unwrap()))
+            })
         };
         // A flat 3 × 1 strip with irregular triangles, and the same strip bent into an arc.
         let flat =
@@ -2735,15 +2731,18 @@ mod tests {
             r.energy_before > 4.0 + 1e-6 && (r.energy_after - 4.0).abs() < 1e-9 && r.rounds <= 3,
             "{r:?}"
         );
-        let ctx_of = |m: &TriMesh| {
-            let uv = m.uv.as_ref().unwrap();
-            let degenerate = degenerate_3d_faces(m);
-            let opts = InjectiveOptions::default();
-            let ctx = Ctx { mesh: m, uv, degenerate: &degenerate, opts: &opts };
-            let faces: Vec<u32> = (0..m.triangles.len() as u32).collect();
-            Patch::new(&ctx, &faces).is_developable_disc()
-        };
-        assert!(ctx_of(&flat) && ctx_of(&bent) && !ctx_of(&cone(6, 1.0)));
+        let developable = |m: &TriMesh| whole_patch(m, Patch::is_developable_disc);
+        assert!(developable(&flat) && developable(&bent) && !developable(&cone(6, 1.0)));
+    }
+
+    /// `f` of the patch of all of `m`'s faces, with default options.
+    fn whole_patch<R>(m: &TriMesh, f: impl FnOnce(&Patch) -> R) -> R {
+        let uv = m.uv.as_ref().unwrap();
+        let degenerate = degenerate_3d_faces(m);
+        let opts = InjectiveOptions::default();
+        let ctx = Ctx { mesh: m, uv, degenerate: &degenerate, opts: &opts };
+        let faces: Vec<u32> = (0..m.triangles.len() as u32).collect();
+        f(&Patch::new(&ctx, &faces))
     }
 
     /// The global step refilled into a kept pattern (the scaffold kept, its rest shapes taken
