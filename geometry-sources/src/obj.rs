@@ -223,17 +223,19 @@ fn count_faces_with_texture_indices(text: &str) -> (usize, usize) {
 mod tests {
     use super::*;
 
-    fn write(name: &str, text: &str) -> std::path::PathBuf {
-        let dir = std::env::temp_dir().join(format!("nuvo-obj-test-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let p = dir.join(name);
+    /// Writes `text` to `name` in `dir` (a test's own temporary directory, removed when the test
+    /// drops it).
+    fn write(dir: &tempfile::TempDir, name: &str, text: &str) -> std::path::PathBuf {
+        let p = dir.path().join(name);
         std::fs::write(&p, text).unwrap();
         p
     }
 
     #[test]
     fn reads_quad_with_uvs_as_two_triangles() {
+        let dir = tempfile::tempdir().unwrap();
         let p = write(
+            &dir,
             "quad.obj",
             "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3 4/4\n",
         );
@@ -246,8 +248,9 @@ mod tests {
 
     #[test]
     fn vertices_keep_the_file_order_even_unreferenced_ones() {
+        let dir = tempfile::tempdir().unwrap();
         // The faces use vertex 3 first and never use vertex 5; negative indices count back.
-        let p = write("order.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 9 9 9\nf 3 4 1\nf 3 -4 -5\n");
+        let p = write(&dir, "order.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 9 9 9\nf 3 4 1\nf 3 -4 -5\n");
         let m = load_obj(&p).unwrap();
         assert_eq!(m.positions.len(), 5);
         assert_eq!(m.positions[4], [9.0, 9.0, 9.0]);
@@ -257,9 +260,10 @@ mod tests {
 
     #[test]
     fn a_short_colour_line_in_the_mtl_loses_the_materials_not_the_mesh() {
+        let dir = tempfile::tempdir().unwrap();
         // tobj itself panics on `Kd 0.5`.
-        write("short.mtl", "newmtl m\nKd 0.5\n");
-        let p = write("short.obj", "mtllib short.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl m\nf 1 2 3\n");
+        write(&dir, "short.mtl", "newmtl m\nKd 0.5\n");
+        let p = write(&dir, "short.obj", "mtllib short.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl m\nf 1 2 3\n");
         assert_eq!(load_obj(&p).unwrap().triangles.len(), 1);
         let read = load_obj_full(&p, true).unwrap();
         assert!(matches!(read.appearance.materials, Some(Err(tobj::LoadError::MaterialParseError))));
@@ -268,7 +272,8 @@ mod tests {
 
     #[test]
     fn empty_file_is_an_error_naming_the_file() {
-        let p = write("empty.obj", "");
+        let dir = tempfile::tempdir().unwrap();
+        let p = write(&dir, "empty.obj", "");
         let e = load_obj(&p).unwrap_err().to_string();
         assert!(e.contains("empty.obj"), "{e}");
     }
