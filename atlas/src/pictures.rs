@@ -93,14 +93,20 @@ pub fn uv_layout(
     Ok(img)
 }
 
+/// The most cells a side of [`checkerboard`] has: one letter per column, `A` to `Z`.
+pub const MAX_CHECKER_CELLS: u32 = 26;
+
 /// A `resolution²` checkerboard of `cells × cells` squares over `[0,1]²`, each labelled with its
 /// column letter (`A`… along +u) and row number (`1`… along +v), so `A1` touches the UV origin.
 /// Hue varies with the column and brightness alternates, so rotations, mirrorings and stretch are
-/// visible on a render. `cells` must be in `1..=26`.
+/// visible on a render. `cells` must be in `1..=`[`MAX_CHECKER_CELLS`].
 pub fn checkerboard(resolution: u32, cells: u32) -> Result<RgbImage, AtlasError> {
     check_side("checkerboard resolution", resolution)?;
-    if !(1..=26).contains(&cells) || cells > resolution {
-        return Err(AtlasError::invalid("checkerboard", format!("{cells} cells is not in 1..=26")));
+    if !(1..=MAX_CHECKER_CELLS).contains(&cells) || cells > resolution {
+        return Err(AtlasError::invalid(
+            "checkerboard",
+            format!("{cells} cells is not in 1..={MAX_CHECKER_CELLS}"),
+        ));
     }
     let cell = |p: u32| (p as u64 * cells as u64 / resolution as u64) as u32;
     let colour = |i: u32, j: u32| {

@@ -41,7 +41,8 @@ use nuvo_atlas::metrics::{EvalOptions, Metrics, evaluate};
 use nuvo_atlas::necks::{NeckOptions, NeckReport, cut_necks, judge_cuts};
 use nuvo_atlas::pack::AtlasLayout;
 use nuvo_atlas::pictures::{
-    ChartGrid, chart_grid_image, checkerboard, pack_images, png_bytes, render_textured, uv_layout, write_png,
+    ChartGrid, MAX_CHECKER_CELLS, chart_grid_image, checkerboard, pack_images, png_bytes, render_textured,
+    uv_layout, write_png,
 };
 use nuvo_atlas::refine::{RefineOptions, RefineReport, refine_islands};
 use nuvo_atlas::texture::{SurfaceColour, TextureOptions, TextureReport, bake_texture};
@@ -224,6 +225,13 @@ fn finish_layout(
     Ok((mesh, summary))
 }
 
+/// Cells per side of `checker.png` for a squares layout of `columns` columns: 8 per chart's
+/// square, at most [`MAX_CHECKER_CELLS`] (letters run out): with 10 charts or more (4 columns)
+/// the bake used to fail after training with "32 cells is not in 1..=26".
+fn checker_cells(columns: u32) -> u32 {
+    (8 * columns).clamp(1, MAX_CHECKER_CELLS)
+}
+
 /// `make_injective`'s options for `opts`.
 fn injective_options(opts: &OutputConfig) -> InjectiveOptions {
     // Split parts lie on each other until packed, so only island packing may split.
@@ -402,7 +410,8 @@ fn bake_and_measure(
     } else {
         None
     };
-    let checker = checkerboard(opts.atlas_resolution.min(2048), 8 * layout.columns)?;
+    let side = opts.atlas_resolution.min(2048);
+    let checker = checkerboard(side, checker_cells(layout.columns).min(side))?;
     write_png(&path(names::CHECKER), &checker)?;
     files.push(path(names::CHECKER));
     // Encoded once: the file and the GLB's embedded image are the same bytes.
@@ -677,6 +686,16 @@ fn write_point_uvs(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_checker_of_any_chart_count_can_be_drawn() {
+        for charts in [1u32, 4, 9, 10, 12, 16, 64, 1000] {
+            let columns = (charts as f64).sqrt().ceil() as u32;
+            let cells = checker_cells(columns);
+            assert!(nuvo_atlas::pictures::checkerboard(64, cells).is_ok(), "{charts} charts: {cells} cells");
+        }
+        assert_eq!((checker_cells(1), checker_cells(3), checker_cells(4)), (8, 24, MAX_CHECKER_CELLS));
+    }
 
     #[test]
     fn frames_match_within_rounding_not_beyond() {
