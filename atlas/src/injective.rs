@@ -22,9 +22,9 @@
 //!    isometry on a developable patch) when it passes the injective check, else the **Tutte
 //!    embedding** (mean-value weights, symmetrised; boundary on a circle by arc length),
 //!    injective for any positive weights and a strictly convex boundary (Floater 2003,
-//!    "One-to-one piecewise linear mappings over triangulations"), then SLIM (step 5). The result is kept when its symmetric Dirichlet energy
-//!    per unit area is at most [`SPLIT_ENERGY`], or when splitting is not allowed or the island
-//!    is one face.
+//!    "One-to-one piecewise linear mappings over triangulations"), then SLIM (step 5). The
+//!    result is kept when its symmetric Dirichlet energy per unit area is at most
+//!    [`SPLIT_ENERGY`], or when splitting is not allowed or the island is one face.
 //! 4. **Split** (`split`): otherwise the bad faces of the current map are **detached**: the good
 //!    faces keep their map and grow back over the bad ones breadth-first (`Patch::grow`: a bad
 //!    face joins when it can be placed, by its rest shape on an edge already placed, as a positive
@@ -628,6 +628,19 @@ impl Rest {
     }
 }
 
+/// Solves `K x = rhs` in place for the symmetric positive definite `dim × dim` matrix `K` whose
+/// lower triangle `triplets` give (duplicates summed), by sparse Cholesky; `None` when a value
+/// is not finite or `K` cannot be factored.
+fn solve_lower(dim: usize, triplets: &[Triplet<usize, usize, f64>], rhs: &mut Mat<f64>) -> Option<()> {
+    if triplets.iter().any(|t| !t.val.is_finite()) {
+        return None;
+    }
+    let k = SparseColMat::<usize, f64>::try_new_from_triplets(dim, dim, triplets).ok()?;
+    let llt = k.sp_cholesky(Side::Lower).ok()?;
+    llt.solve_in_place(rhs.as_mut());
+    Some(())
+}
+
 /// Whether a SLIM round that lowered the energy by `decrease` from `energy` (an isometry's being
 /// `isometric`) ends the rounds: it removed less than [`InjectiveOptions::tolerance`] of the
 /// energy and less than [`InjectiveOptions::excess_tolerance`] of the excess over an isometry's.
@@ -782,6 +795,12 @@ impl Patch {
         patch
     }
 
+    /// The summed weight of the live faces' rest shapes: the patch's rest area (each degenerate
+    /// face counted at its [`DEGENERATE_WEIGHT`]); an isometry's energy is four times it.
+    fn rest_weight(&self) -> f64 {
+        self.live().map(|(t, _)| self.rest[t].weight).sum()
+    }
+
     /// The live faces: `(index, corners)` of the faces that are not collapsed.
     fn live(&self) -> impl Iterator<Item = (usize, [u32; 3])> + '_ {
         self.corners.iter().enumerate().filter(|(t, _)| !self.collapsed[*t]).map(|(t, &c)| (t, c))
@@ -872,7 +891,7 @@ impl Patch {
         }
         let p = self.facing(p);
         let auv: f64 = self.live().map(|(_, c)| 0.5 * area2(c.map(|i| p[i as usize])).abs()).sum();
-        let total: f64 = self.live().map(|(t, _)| self.rest[t].weight).sum();
+        let total = self.rest_weight();
         if !(auv > 0.0 && total > 0.0) {
             return None;
         }
@@ -977,7 +996,7 @@ impl Patch {
         // Boundary on a circle of the patch's rest area, by rest arc length.
         let arcs: Vec<f64> = self.rest_arcs(boundary).into_iter().map(|a| a.max(f64::MIN_POSITIVE)).collect();
         let perimeter: f64 = arcs.iter().sum();
-        let total: f64 = self.live().map(|(t, _)| self.rest[t].weight).sum();
+        let total = self.rest_weight();
         let radius = (total.max(f64::MIN_POSITIVE) / std::f64::consts::PI).sqrt();
         let mut p = vec![[0.0f64; 2]; self.n];
         let mut s = 0.0;
@@ -1050,19 +1069,14 @@ impl Patch {
                 }
             }
         }
-        if triplets.iter().any(|t| !t.val.is_finite()) {
-            return None;
-        }
-        let k = SparseColMat::<usize, f64>::try_new_from_triplets(2 * m, 2 * m, &triplets).ok()?;
-        let llt = k.sp_cholesky(Side::Lower).ok()?;
-        llt.solve_in_place(rhs.as_mut());
+        solve_lower(2 * m, &triplets, &mut rhs)?;
         for (v, &r) in row.iter().enumerate() {
             if r != u32::MAX {
                 p[v] = [rhs[(r as usize, 0)], rhs[(m + r as usize, 0)]];
             }
         }
         let uv_area: f64 = self.live().map(|(_, c)| 0.5 * area2(c.map(|v| p[v as usize]))).sum();
-        let rest_area: f64 = self.live().map(|(t, _)| self.rest[t].weight).sum();
+        let rest_area = self.rest_weight();
         let scale = (rest_area / uv_area).sqrt();
         if !(uv_area > 0.0 && scale.is_finite()) {
             return None;
@@ -1119,12 +1133,7 @@ impl Patch {
                 }
             }
         }
-        if triplets.iter().any(|t| !t.val.is_finite()) {
-            return None;
-        }
-        let k = SparseColMat::<usize, f64>::try_new_from_triplets(m, m, &triplets).ok()?;
-        let llt = k.sp_cholesky(Side::Lower).ok()?;
-        llt.solve_in_place(rhs.as_mut());
+        solve_lower(m, &triplets, &mut rhs)?;
         for (r, &v) in interior.iter().enumerate() {
             p[v as usize] = [rhs[(r, 0)], rhs[(r, 1)]];
         }
@@ -1201,7 +1210,7 @@ impl Patch {
         free_rounds: usize,
     ) -> (Vec<[f64; 2]>, usize) {
         let Some(mut energy) = self.energy_of(&p, true) else { return (p, 0) };
-        let isometric = 4.0 * self.live().map(|(t, _)| self.rest[t].weight).sum::<f64>();
+        let isometric = 4.0 * self.rest_weight();
         let glue = self.coincident_boundary(&p);
         let Some(mut system) = SlimSystem::new(self, glue) else { return (p, 0) };
         let mut rounds = 0;
@@ -1462,8 +1471,6 @@ impl Patch {
         })
     }
 
-    /// The cone points of this disc (module docs, step 6), strongest first; `adj` is its
-    /// [`Patch::edge_graph`].
     /// Per unknown, its angle deficit: 2π minus the rest angles of its faces; 0 on the boundary
     /// and where a face without 3-D area touches (whose rest angles are made up).
     fn deficits(&self) -> Vec<f64> {
@@ -1493,6 +1500,8 @@ impl Patch {
         self.topology.disc && self.deficits().iter().all(|d| d.abs() <= DEVELOPABLE_DEFICIT)
     }
 
+    /// The cone points of this disc (module docs, step 6), strongest first; `adj` is its
+    /// [`Patch::edge_graph`].
     fn cone_points(&self, adj: &Adjacency) -> Vec<u32> {
         let n = self.n;
         let deficit = self.deficits();

@@ -46,8 +46,8 @@
 //!   islands that may be cut again.
 //! - **Judgement** ([`judge_cuts`], run by the caller after it relaxed the parts): the cuts of
 //!   the pass are kept only when the Editability that the layout will score once packed,
-//!   estimated from one rendering of [`JUDGE_VIEWS`] with every edge between two islands a seam
-//!   ([`crate::metrics::unpacked_editability`]), falls by at most
+//!   estimated from one rendering of the views of [`JUDGE_SEED`] with every edge between two
+//!   islands a seam ([`crate::metrics::unpacked_editability`]), falls by at most
 //!   [`NeckOptions::editability_per_packing`] times `ln(efficiency_after / efficiency_before)`;
 //!   otherwise all are undone. The seam term above prices a seam by its length against the
 //!   surface's size; what a seam costs in the renders also depends on how much of each view the
@@ -76,7 +76,7 @@ use crate::islands::{
     IslandPacking, SHAPES_UP_TO, ScaleTest, convex_hull, min_area_rotation, pack_islands, packs_at_scale,
     rotated,
 };
-use crate::metrics::{ImageParams, unpacked_editability};
+use crate::metrics::{EvalOptions, unpacked_editability};
 use crate::partuv::face_areas_3d;
 use crate::refine::island_unknowns;
 use crate::uvstats::{Dsu, face_uv_area2, faces_by_edge, require_uv, uv_charts, uv_islands};
@@ -145,10 +145,10 @@ impl Default for NeckOptions {
 /// their seams (Editability +0.0002 to +0.004).
 pub const EDITABILITY_PER_PACKING: f64 = 0.02;
 
-/// Views with which [`judge_cuts`] renders the mesh: as many and as large as the evaluation's
-/// ([`crate::metrics::EvalOptions`]) but from other directions (seed 1, not 0), so that the
+/// Seed of the views with which [`judge_cuts`] renders the mesh: as many and as large as the
+/// evaluation's ([`EvalOptions`]'s defaults) but from other directions (1, not 0), so that the
 /// choice is not made on the very views that score it.
-pub const JUDGE_VIEWS: (usize, u64, u32) = (16, 1, 800);
+pub const JUDGE_SEED: u64 = 1;
 
 /// What [`cut_necks`] did.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
@@ -271,8 +271,8 @@ pub fn cut_necks(mesh: &TriMesh, opts: &NeckOptions) -> Result<Necked, AtlasErro
 
 /// Whether the cuts that turned `before` into `after` (the same mesh with the layout of
 /// [`cut_necks`], relaxed or not) are worth their seams: kept when the Editability that `after`
-/// will score once packed, estimated by [`unpacked_editability`] over [`JUDGE_VIEWS`], is at
-/// least `before`'s less [`NeckOptions::editability_per_packing`] times the log of the packing
+/// will score once packed, estimated by [`unpacked_editability`] over the views of
+/// [`JUDGE_SEED`], is at least `before`'s less [`NeckOptions::editability_per_packing`] times the log of the packing
 /// rise that `report` measured. Records the estimates and the verdict in `report`. Errors: the
 /// meshes differ in positions or faces, no UVs.
 pub fn judge_cuts(
@@ -285,9 +285,9 @@ pub fn judge_cuts(
         return Ok(true);
     }
     let Some(bounds) = before.bounds() else { return Ok(true) };
-    let (count, seed, side) = JUDGE_VIEWS;
-    let cameras = orbit_views(&bounds, count, seed, side, side);
-    let e = unpacked_editability(before, &[before, after], &cameras, &ImageParams::default())?;
+    let views = EvalOptions { seed: JUDGE_SEED, ..Default::default() };
+    let cameras = orbit_views(&bounds, views.views, views.seed, views.resolution, views.resolution);
+    let e = unpacked_editability(before, &[before, after], &cameras, &views.image)?;
     let rise = (report.efficiency_after / report.efficiency_before).max(1.0);
     let keep = e[1] >= e[0] - opts.editability_per_packing * rise.ln();
     report.editability = Some([e[0], e[1]]);
