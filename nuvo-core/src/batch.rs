@@ -51,6 +51,13 @@ impl BatchSizes {
             distortion: t.batch_distortion.unwrap_or(t.batch_3d),
         }
     }
+
+    /// These sizes times `share` (in `(0, 1]`), rounded to the nearest (not up: `0.3_f32` is a
+    /// little above 0.3), and at least one sample of each kind that had one.
+    pub fn share(self, share: f32) -> Self {
+        let scaled = |n: usize| ((n as f64 * f64::from(share)).round() as usize).clamp(n.min(1), n);
+        BatchSizes { points: scaled(self.points), uv: scaled(self.uv), distortion: scaled(self.distortion) }
+    }
 }
 
 impl StepBatch {
@@ -130,6 +137,14 @@ pub fn random_tangent_frame(n: &[f32; 3], rng: &mut impl Rng) -> ([f32; 3], [f32
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_share_of_the_batch_rounds_up_and_keeps_one_of_each_kind_it_had() {
+        let sizes = BatchSizes { points: 7, uv: 1, distortion: 0 };
+        assert_eq!(sizes.share(0.5), BatchSizes { points: 4, uv: 1, distortion: 0 });
+        assert_eq!(sizes.share(0.01), BatchSizes { points: 1, uv: 1, distortion: 0 });
+        assert_eq!(sizes.share(1.0), sizes);
+    }
 
     #[test]
     fn tangent_frames_are_orthonormal_and_tangent() {

@@ -149,6 +149,8 @@ pub struct Trainer {
     last_look: Option<Snapshot>,
     /// Looks in a row at which the atlas had settled.
     settled_looks: u32,
+    /// Draw full batches even while `warm_start.batch_share` applies (`Trainer::time_full_batches`).
+    full_batches: bool,
 }
 
 /// Steps between two looks of the settling probe; `checkpoint_every` being a multiple of it (the
@@ -224,6 +226,7 @@ impl Trainer {
             probe_points: Vec::new(),
             last_look: None,
             settled_looks: 0,
+            full_batches: false,
         })
     }
 
@@ -278,6 +281,18 @@ impl Trainer {
         self.lr_scale *= 0.5;
     }
 
+    /// The batch the last step drew.
+    pub fn batch(&self) -> &StepBatch {
+        &self.batch
+    }
+
+    /// Whether steps draw full batches even while `warm_start.batch_share` would shrink them:
+    /// `nuvo unwrap` times its first steps this way, so its step plan rests on the cost of a
+    /// full step (what `MEAN_STEP_COST` was measured against) and not on a warm-start step's.
+    pub fn time_full_batches(&mut self, on: bool) {
+        self.full_batches = on;
+    }
+
     /// Runs one optimisation step.
     ///
     /// The step runs on a rayon worker thread: the engine's parallel kernels then fork and join
@@ -288,7 +303,13 @@ impl Trainer {
     }
 
     fn step_on_worker(&mut self) -> Result<StepOutcome, TrainError> {
-        let sizes = BatchSizes::of(&self.config.training);
+        let mut sizes = BatchSizes::of(&self.config.training);
+        if let Some(ws) = &self.config.warm_start
+            && !self.full_batches
+            && self.chart_support_suspended(self.step)
+        {
+            sizes = sizes.share(ws.batch_share);
+        }
         self.batch = StepBatch::draw(&*self.source, sizes, self.config.seed, self.step)?;
         let lr_factor = self.schedule.factor(self.step) * self.lr_scale;
         let mut outcome = StepOutcome {
@@ -382,11 +403,13 @@ impl Trainer {
     /// `training.chart_support` at `step`: 0 while a term flagged
     /// [`Term::suspends_chart_support`] (the warm-start prior) weighs in.
     fn chart_support_at(&self, step: u64) -> f32 {
-        if self.terms.iter().any(|t| t.suspends_chart_support && t.weight_at(step) > 0.0) {
-            0.0
-        } else {
-            self.config.training.chart_support
-        }
+        if self.chart_support_suspended(step) { 0.0 } else { self.config.training.chart_support }
+    }
+
+    /// Whether a term flagged [`Term::suspends_chart_support`] (the warm-start prior) weighs in
+    /// at `step`.
+    fn chart_support_suspended(&self, step: u64) -> bool {
+        self.terms.iter().any(|t| t.suspends_chart_support && t.weight_at(step) > 0.0)
     }
 
     /// Which term's gradient is not finite: re-records the step one term at a time. Only runs after a

@@ -62,6 +62,11 @@ pub struct WarmStartConfig {
     /// the same way, one behind the other (the bunny's ears seen edge-on), get the same target UVs
     /// and start overlapping.
     pub occlusion: bool,
+    /// Share of `training.batch_3d`, `batch_uv` and `batch_distortion` that a step draws while the
+    /// prior weighs in (in `(0, 1]`; rounded, at least one sample of each). Every chart reads
+    /// every sample until the prior fades, so these steps cost about twice the later ones;
+    /// `nuvo unwrap` sets 0.5.
+    pub batch_share: f32,
 }
 
 impl Default for WarmStartConfig {
@@ -73,6 +78,7 @@ impl Default for WarmStartConfig {
             min_alignment: 0.3,
             samples: 20_000,
             occlusion: false,
+            batch_share: 1.0,
         }
     }
 }
@@ -90,6 +96,9 @@ impl WarmStartConfig {
         }
         if !(-1.0 < self.min_alignment && self.min_alignment < 1.0) {
             return Err(src.invalid("warm_start.min_alignment", "must be in (-1, 1): a cosine"));
+        }
+        if !(self.batch_share > 0.0 && self.batch_share <= 1.0) {
+            return Err(src.invalid("warm_start.batch_share", "must be in (0, 1]: a share of the batch"));
         }
         if self.enabled() && self.samples < charts {
             return Err(src.invalid("warm_start.samples", "needs at least one sample per chart"));

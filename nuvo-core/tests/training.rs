@@ -443,6 +443,31 @@ fn the_chart_support_waits_for_the_warm_start_then_prunes_deterministically() {
 }
 
 #[test]
+fn the_warm_start_draws_its_share_of_the_batch_and_timing_draws_it_whole() {
+    let mut cfg = small("[warm_start]\nsteps = 2\nbatch_share = 0.3\n");
+    cfg.config.training.batch_3d = 100;
+    cfg.config.training.batch_uv = 64;
+    let sizes = |t: &Trainer| (t.batch().points.len(), t.batch().uv.len(), t.batch().tangents_p.len());
+    let mut t = trainer(&cfg);
+    let mut seen = Vec::new();
+    for _ in 0..3 {
+        t.step().unwrap();
+        seen.push(sizes(&t));
+    }
+    // 0.3 · 100 = 30 points (all with tangent frames), 0.3 · 64 ≈ 19 UV samples, then full.
+    assert_eq!(seen, [(30, 19, 30), (30, 19, 30), (100, 64, 100)]);
+    let mut timed = trainer(&cfg);
+    timed.time_full_batches(true);
+    timed.step().unwrap();
+    assert_eq!(sizes(&timed), (100, 64, 100));
+    // Back off, the same step draws its share again: a pure function of the config and step.
+    timed.time_full_batches(false);
+    let mut again = trainer(&cfg);
+    again.step().unwrap();
+    assert_eq!(sizes(&again), (30, 19, 30));
+}
+
+#[test]
 fn pruned_steps_do_not_depend_on_the_thread_count() {
     // Wide (128) and large enough that the weight-gradient products of the pruned, odd-sized
     // batches take the engine's row-split GEMM path at inner sizes where its blocking matters.
@@ -464,6 +489,8 @@ fn warm_start_mistakes_are_located() {
     for (text, key) in [
         ("[warm_start]\nmin_alignment = 1.5\n", "warm_start.min_alignment"),
         ("[warm_start]\nweight = -1\n", "warm_start.weight"),
+        ("[warm_start]\nbatch_share = 0\n", "warm_start.batch_share"),
+        ("[warm_start]\nbatch_share = 1.5\n", "warm_start.batch_share"),
         ("[warm_start]\nstep = 3\n", "warm_start.step"),
         ("[warm_start]\nprojection = \"azimuthal\"\nocclusion = true\n", "warm_start.occlusion"),
     ] {
