@@ -79,7 +79,8 @@
 //!    hold the hair-thin slits shut) runs from there. The cuts are kept when they remove at least
 //!    [`CONE_GAIN`] of the disc's energy above an isometry's (`E − 4A`) and raise its PartUV
 //!    area distortion (a per-face mean, small faces counted like large ones) by at most
-//!    [`CONE_AREA_RISE`]; otherwise the disc stays as it was solved. Cone cuts add seams but no island.
+//!    [`CONE_AREA_RISE`]; otherwise the disc stays as it was solved. Cone cuts add seams but no
+//!    island.
 //!
 //! Definitions (exact):
 //! - **Island**: a chart of [`crate::uvstats::uv_charts`]; its **unknowns** are those of

@@ -139,7 +139,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_share_of_the_batch_rounds_up_and_keeps_one_of_each_kind_it_had() {
+    fn a_share_of_the_batch_rounds_to_the_nearest_and_keeps_one_of_each_kind_it_had() {
         let sizes = BatchSizes { points: 7, uv: 1, distortion: 0 };
         assert_eq!(sizes.share(0.5), BatchSizes { points: 4, uv: 1, distortion: 0 });
         assert_eq!(sizes.share(0.01), BatchSizes { points: 1, uv: 1, distortion: 0 });
