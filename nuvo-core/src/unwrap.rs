@@ -408,10 +408,11 @@ pub fn choose_charts(trials: &[ChartTrial]) -> (usize, Decision) {
 /// Steps timed to estimate the speed of training.
 pub const TIMED_STEPS: u64 = 8;
 /// Steps after the warm start cost less than the timed ones (chart support prunes the charts a
-/// sample does not belong to); measured on the suite, the whole run averages this fraction of the
-/// timed step cost (BENCHMARKS.md, "nuvo unwrap"). Measured before the warm start drew half
-/// batches (`warm_start.batch_share`; the timed steps still draw full ones), so a run that trains
-/// to its plan now ends sooner than its budget: the plan errs on the safe side.
+/// sample does not belong to, and the warm start's own steps draw half batches): the whole run
+/// averages this fraction of the fastest timed step. First measured on the suite against the
+/// mean timed step before the warm start drew half batches (BENCHMARKS.md, "nuvo unwrap"); with
+/// both, fragmented runs averaged 156–160 ms a step against 195–207 ms for the fastest timed one
+/// (BENCHMARKS.md, "Half batches while the warm start weighs in").
 pub const MEAN_STEP_COST: f64 = 0.8;
 /// Fewest and most steps a fitted run gets. The budget wins over quality: fewer than ~1000 steps
 /// cost Editability (BENCHMARKS.md "Atlas quality"), so a slow machine or a large chart count
@@ -419,27 +420,32 @@ pub const MEAN_STEP_COST: f64 = 0.8;
 pub const MIN_STEPS: u64 = 300;
 pub const MAX_STEPS: u64 = 4000;
 
-/// Times [`TIMED_STEPS`] steps of `trainer` (at step 0), puts it back as it was, and returns the
-/// step count that fits `budget_seconds` (rounded down to a multiple of 50, so timing noise rarely
-/// changes it; within [`MIN_STEPS`]`..=`[`MAX_STEPS`]). The caller builds the run's trainer with it,
-/// since the warm start's length follows the step count ([`recipe`]).
+/// Times [`TIMED_STEPS`] steps of `trainer` (at step 0) one by one, puts it back as it was, and
+/// returns the step count that fits `budget_seconds` at the fastest of them (rounded down to a
+/// multiple of 50, so timing noise rarely changes it; within [`MIN_STEPS`]`..=`[`MAX_STEPS`]).
+/// The fastest, not the mean: on a shared machine a few steps run 30–80% slow now and then, and
+/// the mean of eight moved the plan of one input between 350 and 500 steps from run to run
+/// (fastest step: within 14%). The caller builds the run's trainer with it, since the warm
+/// start's length follows the step count ([`recipe`]).
 pub fn fit_steps(trainer: &mut Trainer, budget_seconds: f64) -> Result<(u64, Decision), UnwrapError> {
     let start = trainer.checkpoint()?;
     // Timed at full batches: a warm start on a share of them costs less than the plan assumes.
     trainer.time_full_batches(true);
     // One untimed step first: it allocates the tape's buffers.
     trainer.step()?;
-    let t = Instant::now();
+    let mut per_step = f64::INFINITY;
     for _ in 0..TIMED_STEPS {
+        let t = Instant::now();
         trainer.step()?;
+        per_step = per_step.min(t.elapsed().as_secs_f64());
     }
-    let per_step = t.elapsed().as_secs_f64() / TIMED_STEPS as f64;
     trainer.time_full_batches(false);
     trainer.restore(&start)?;
     let steps = steps_for(budget_seconds, per_step);
     let settles = trainer.settling_threshold().is_some();
     let why = format!(
-        "{}{:.0} ms per step timed at the start (≈{:.0} ms on average over a run), {budget_seconds:.0} s of \
+        "{}{:.0} ms for the fastest of {TIMED_STEPS} steps timed at the start (≈{:.0} ms on average over a \
+         run), {budget_seconds:.0} s of \
          training budget{}",
         if settles { "at most: " } else { "" },
         1e3 * per_step,
