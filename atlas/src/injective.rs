@@ -2734,7 +2734,7 @@ mod tests {
     #[test]
     fn the_conformal_start_of_a_developable_patch_is_an_isometry() {
         let energy_density = |m: &TriMesh| {
-            whole_patch(m, |patch| {
+            whole_patch(m, |patch, _| {
                 let lscm = patch.lscm().unwrap();
                 assert!(patch.is_injective(&lscm));
                 let per_area = |p: &[[f64; 2]]| patch.energy(p).unwrap() / patch.area3;
@@ -2766,18 +2766,18 @@ mod tests {
             r.energy_before > 4.0 + 1e-6 && (r.energy_after - 4.0).abs() < 1e-9 && r.rounds <= 3,
             "{r:?}"
         );
-        let developable = |m: &TriMesh| whole_patch(m, Patch::is_developable_disc);
+        let developable = |m: &TriMesh| whole_patch(m, |patch, _| patch.is_developable_disc());
         assert!(developable(&flat) && developable(&bent) && !developable(&cone(6, 1.0)));
     }
 
-    /// `f` of the patch of all of `m`'s faces, with default options.
-    fn whole_patch<R>(m: &TriMesh, f: impl FnOnce(&Patch) -> R) -> R {
+    /// `f` of the patch of all of `m`'s faces and its context, with default options.
+    fn whole_patch<R>(m: &TriMesh, f: impl FnOnce(&Patch, &Ctx) -> R) -> R {
         let uv = m.uv.as_ref().unwrap();
         let degenerate = degenerate_3d_faces(m);
         let opts = InjectiveOptions::default();
         let ctx = Ctx { mesh: m, uv, degenerate: &degenerate, opts: &opts };
         let faces: Vec<u32> = (0..m.triangles.len() as u32).collect();
-        f(&Patch::new(&ctx, &faces))
+        f(&Patch::new(&ctx, &faces), &ctx)
     }
 
     /// The global step refilled into a kept pattern (the scaffold kept, its rest shapes taken
@@ -3023,15 +3023,9 @@ mod tests {
         let triangles = vec![[0, 1, 2], [0, 2, 3]];
         let coords = vec![[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]];
         let m = TriMesh { positions, uv: Some(UvLayer { coords, triangles: triangles.clone() }), triangles };
-        let uv = m.uv.as_ref().unwrap();
-        whole_patch(&m, |patch| {
-            let mut p = vec![[0.0; 2]; patch.n];
-            for (t, c) in patch.corners.iter().enumerate() {
-                for k in 0..3 {
-                    let q = uv.coords[uv.triangles[t][k] as usize];
-                    p[c[k] as usize] = [f64::from(q[0]), f64::from(q[1])];
-                }
-            }
+        whole_patch(&m, |patch, ctx| {
+            // The map as given: UV area 1 over rest area 1, so not rescaled.
+            let mut p = patch.current(ctx).unwrap();
             assert!((patch.area_distortion(&p) - 1.0).abs() < 1e-12);
             // Move the corner only the second face uses: its UV area triples.
             let v = patch.corners[1][2] as usize;

@@ -273,8 +273,8 @@ pub fn cut_necks(mesh: &TriMesh, opts: &NeckOptions) -> Result<Necked, AtlasErro
 /// [`cut_necks`], relaxed or not) are worth their seams: kept when the Editability that `after`
 /// will score once packed, estimated by [`unpacked_editability`] over the views of
 /// [`JUDGE_SEED`], is at least `before`'s less [`NeckOptions::editability_per_packing`] times
-/// the log of the packing rise that `report` measured. Records the estimates and the verdict in `report`. Errors: the
-/// meshes differ in positions or faces, no UVs.
+/// the log of the packing rise that `report` measured. Records the estimates and the verdict
+/// in `report`. Errors: the meshes differ in positions or faces, no UVs.
 pub fn judge_cuts(
     before: &TriMesh,
     after: &TriMesh,

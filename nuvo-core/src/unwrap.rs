@@ -411,8 +411,9 @@ pub const TIMED_STEPS: u64 = 8;
 /// sample does not belong to, and the warm start's own steps draw half batches): the whole run
 /// averages this fraction of the fastest timed step. First measured on the suite against the
 /// mean timed step before the warm start drew half batches (BENCHMARKS.md, "nuvo unwrap"); with
-/// both, fragmented runs averaged 156–160 ms a step against 195–207 ms for the fastest timed one
-/// (BENCHMARKS.md, "Half batches while the warm start weighs in").
+/// both, fragmented runs averaged 0.72–0.75 of the fastest timed step (homer_unruly 144 ms a
+/// step against 200 ms, unruly_bunny 143 against 191; BENCHMARKS.md, "Half batches while the
+/// warm start weighs in").
 pub const MEAN_STEP_COST: f64 = 0.8;
 /// Fewest and most steps a fitted run gets. The budget wins over quality: fewer than ~1000 steps
 /// cost Editability (BENCHMARKS.md "Atlas quality"), so a slow machine or a large chart count
