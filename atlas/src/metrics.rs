@@ -312,16 +312,18 @@ pub(crate) fn abs_cos_tangents(e1: DVec3, e2: DVec3, duv: [f64; 4]) -> Option<f6
     (den > 0.0).then(|| (t.dot(bt) / den).abs().min(1.0))
 }
 
-/// The scores of one rendered view, `None` when it has no measurable pixel. With `islands` (one
-/// label per face), neighbours that see faces of different islands are on a boundary whatever
-/// their UV distance ([`unpacked_editability`]).
-fn view_scores(
+/// The boundary pixels of one rendered view (module docs, **Boundary**), in row-major order, each
+/// as `(pixel, neighbour)`: its index in `g.pixels` and that of the first 4-neighbour (left,
+/// right, up, down) that makes it one. With `islands` (one label per face), a neighbour that sees
+/// another island counts whatever the UV distance ([`unpacked_editability`]). Public so that a
+/// diagnosis can ask which faces, islands or pieces of a mesh a view's seams fall on (the
+/// `boundary_sources` example); Boundary itself only counts them.
+pub fn boundary_pixels(
     uv: &UvLayer,
-    faces: &[Option<[f32; 2]>],
     islands: Option<&[u32]>,
     g: &GBuffer,
     params: &ImageParams,
-) -> Option<ViewScores> {
+) -> Vec<(usize, usize)> {
     let (w, h) = (g.width as usize, g.height as usize);
     let uvp: Vec<[f32; 2]> = g
         .pixels
@@ -348,25 +350,35 @@ fn view_scores(
         });
         !discontinuous && (apart || d[0] * d[0] + d[1] * d[1] > jump2)
     };
-    let (hits, boundary_pixels) = (0..h)
+    (0..h)
         .into_par_iter()
-        .map(|y| {
-            let mut counts = (0usize, 0usize);
-            for x in 0..w {
+        .flat_map_iter(|y| {
+            let is_boundary = &is_boundary;
+            (0..w).filter_map(move |x| {
                 let i = y * w + x;
-                if g.pixels[i].hit().is_none() {
-                    continue;
-                }
-                counts.0 += 1;
-                let b = (x > 0 && is_boundary(i, i - 1))
-                    || (x + 1 < w && is_boundary(i, i + 1))
-                    || (y > 0 && is_boundary(i, i - w))
-                    || (y + 1 < h && is_boundary(i, i + w));
-                counts.1 += b as usize;
-            }
-            counts
+                g.pixels[i].hit()?;
+                let left = (x > 0).then(|| i - 1);
+                let right = (x + 1 < w).then(|| i + 1);
+                let up = (y > 0).then(|| i - w);
+                let down = (y + 1 < h).then(|| i + w);
+                [left, right, up, down].into_iter().flatten().find(|&j| is_boundary(i, j)).map(|j| (i, j))
+            })
         })
-        .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        .collect()
+}
+
+/// The scores of one rendered view, `None` when it has no measurable pixel. With `islands` (one
+/// label per face), neighbours that see faces of different islands are on a boundary whatever
+/// their UV distance ([`unpacked_editability`]).
+fn view_scores(
+    uv: &UvLayer,
+    faces: &[Option<[f32; 2]>],
+    islands: Option<&[u32]>,
+    g: &GBuffer,
+    params: &ImageParams,
+) -> Option<ViewScores> {
+    let hits = g.hit_count();
+    let boundary_pixels = boundary_pixels(uv, islands, g, params).len();
     let samples: Vec<[f32; 2]> =
         g.pixels.par_iter().filter_map(|p| p.hit().and_then(|f| faces[f as usize])).collect();
     if hits == 0 || samples.is_empty() {
@@ -449,6 +461,40 @@ mod tests {
         assert_close("two islands", got[1], 1.0 - 400.0 / 40_000.0, 1e-9);
         let other = grid(9, |p| [p[0], p[1]]);
         assert!(unpacked_editability(&halves, &[&other], &head_on(), &params).is_err());
+    }
+
+    #[test]
+    fn boundary_pixels_are_the_two_columns_along_a_seam_each_paired_across_it() {
+        // Head-on 200² over [-1, 1]²: the seam x = 0 falls between pixel columns 99 and 100. The
+        // left half moved 1.0 in u: columns 99 and 100 are boundary pixels, each made one by its
+        // neighbour across the seam (right of column 99, left of column 100), and no other pixel.
+        let m = grid(10, |p| [(p[0] + 1.0) * 0.5, (p[1] + 1.0) * 0.5]);
+        let halves = with_uv_per_corner(&m, |f, _, uv| {
+            let left = m.corners(f).iter().all(|c| c[0] <= 0.0);
+            if left { [uv[0] + 1.0, uv[1]] } else { uv }
+        });
+        let g = render(&halves, &head_on()[0]).unwrap();
+        let uv = halves.uv.as_ref().unwrap();
+        let got = boundary_pixels(uv, None, &g, &ImageParams::default());
+        assert_eq!(got.len(), 400);
+        for (i, j) in got {
+            let (x, y) = (i % 200, i / 200);
+            assert!(x == 99 || x == 100, "pixel ({x}, {y})");
+            assert_eq!(j, if x == 99 { i + 1 } else { i - 1 }, "pixel ({x}, {y})");
+        }
+        let whole = boundary_pixels(
+            m.uv.as_ref().unwrap(),
+            None,
+            &render(&m, &head_on()[0]).unwrap(),
+            &ImageParams::default(),
+        );
+        assert!(whole.is_empty());
+        assert_close(
+            "Boundary",
+            image_metrics(&halves, &head_on(), &ImageParams::default()).unwrap().boundary,
+            0.99,
+            1e-12,
+        );
     }
 
     #[test]
