@@ -35,7 +35,13 @@
 //!    (the far side of a thin wall that one chart maps from both sides: 43% of the unruly
 //!    vase's faces) is a mirror image of a map that may be good, and is kept or mended whole
 //!    instead of being embedded anew and split (the whole island is turned the same way in
-//!    step 1). An island with no current map to detach from, or whose faces are all bad, is cut
+//!    step 1). A **ragged** detachment is not made: when it would give more than two parts and
+//!    their seams (the summed rest length of the edges between two parts) exceed [`RAGGED_CUT`]
+//!    times the cut between the island's two halves (below), the island is halved instead: where
+//!    one chart maps both sides of a thin wall, the flips of the far side interleave with the
+//!    near side's faces, and detaching them cut the unruly teapot's charts into hundreds of
+//!    parts whose seams covered its body. An island with no current map to detach from, whose
+//!    faces are all bad, or whose detachment is ragged is cut
 //!    into its pieces of consistent winding and manifold edges or, when it is one, into two
 //!    halves grown breadth-first from two far-apart faces. A part of one face is always a disc, so the recursion ends. Without `split` an island
 //!    that is neither injective, repairable nor a disc keeps its UVs (counted as not injective).
@@ -194,6 +200,15 @@ pub const SPLIT_ENERGY: f64 = 4.5;
 /// 30 and 1000 gave the same within 0.0004 (BENCHMARKS.md, "Splitting the discs SLIM could not
 /// flatten").
 pub const FAILED_SLIM_ENERGY: f64 = 100.0;
+
+/// How many times longer than the cut between two halves the seams of detaching a map's bad faces
+/// may be before the island is halved instead (module docs, step 4). Halving a patch that is not
+/// a disc seldom makes discs at once: its halves are halved again, so one halving cut stands for
+/// several. Set between what was measured: ragged detachments of thin-walled charts (the unruly
+/// teapot's islands of 23k–49k faces, detached into 135–422 parts: 6–680 times the halving cut,
+/// mostly over 20) and those of the other generated unruly meshes (spot, the unruly bunny: 1.6–6
+/// times, one island of 408 parts 29 times) (BENCHMARKS.md, "Thin walls").
+pub const RAGGED_CUT: f64 = 8.0;
 
 /// Radius of the neighbourhood whose angle deficits make a cone point, as a share of the square
 /// root of the patch's 3-D area (module docs, step 6). 0.08 gave the same mean Editability on
@@ -539,7 +554,8 @@ impl Ctx<'_> {
     /// Detaches the faces that make `patch`'s map at `p` not injective: faces of non-positive
     /// area and positive faces overlapping another positive face (module docs). The rest keeps
     /// its map; the good and the bad faces each form parts of connected faces, solved anew.
-    /// Returns false (and does nothing) when no face or every face is bad.
+    /// Returns false (and does nothing) when no face or every face is bad, or when the
+    /// detachment would be ragged (module docs, step 4: [`RAGGED_CUT`]).
     fn detach(
         &self,
         patch: &Patch,
@@ -554,7 +570,14 @@ impl Ctx<'_> {
             return false;
         }
         let (bad, q) = patch.grow(&bad, p);
-        for part in patch.components(&bad) {
+        let parts = patch.components(&bad);
+        // Where the map's bad faces are ragged (a thin wall whose far side one chart maps
+        // mirrored, its flips interleaved with the near side's), detaching them cuts the island
+        // into many small parts whose seams the renders see everywhere; two halves cost one cut.
+        if patch.is_ragged(&parts) {
+            return false;
+        }
+        for part in parts {
             let sub = Patch::new(self, &part);
             let current = sub.inherit(patch, &q);
             self.solve(sub, Some(current), placement, out);
@@ -1761,6 +1784,36 @@ impl Patch {
             }
         }
         self.group(|t| dsu.find(t as u32))
+    }
+
+    /// Whether splitting the patch into `parts` (mesh faces, covering it) is ragged (module docs,
+    /// step 4): more than two parts whose seams exceed [`RAGGED_CUT`] times the cut between the
+    /// patch's [`Patch::halves`].
+    fn is_ragged(&self, parts: &[Vec<u32>]) -> bool {
+        parts.len() > 2 && RAGGED_CUT * self.cut_length(&self.halves()) < self.cut_length(parts)
+    }
+
+    /// Summed rest length of the edges between two faces that `parts` (mesh faces, covering the
+    /// patch) put in different parts: the seam that splitting the patch so would add.
+    fn cut_length(&self, parts: &[Vec<u32>]) -> f64 {
+        let part_of: HashMap<u32, usize> =
+            parts.iter().enumerate().flat_map(|(i, p)| p.iter().map(move |&f| (f, i))).collect();
+        let by_edge = faces_by_edge(self.corners.iter().enumerate().map(|(t, &c)| (t as u32, c)));
+        let part = |t: u32| part_of.get(&self.faces[t as usize]).copied();
+        let mut length = 0.0;
+        for (t, c) in self.corners.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b) = (c[k], c[(k + 1) % 3]);
+                if let [f, g] = by_edge[&(a.min(b), a.max(b))][..]
+                    && f == t as u32
+                    && part(f) != part(g)
+                {
+                    let x = &self.rest[t].x;
+                    length += (x[(k + 1) % 3][0] - x[k][0]).hypot(x[(k + 1) % 3][1] - x[k][1]);
+                }
+            }
+        }
+        length
     }
 
     /// Two parts of connected faces grown from two far-apart faces (module docs).
@@ -3031,6 +3084,53 @@ mod tests {
             let v = patch.corners[1][2] as usize;
             p[v][0] -= 2.0;
             assert!((patch.area_distortion(&p) - 1.75).abs() < 1e-12, "{}", patch.area_distortion(&p));
+        });
+    }
+
+    #[test]
+    fn a_cut_measures_the_rest_length_between_its_parts() {
+        // A flat 2 × 1 strip of 8 × 4 cells (faces 2k, 2k + 1 share cell k = 8j + i). Split at
+        // s = 1/2 (x = 1): one straight cut of length 1 across its four rows. Split into the
+        // cells of even and odd column: seven cuts of length 1. The same halves with a third,
+        // empty part change nothing; a cell's own two faces never count (they share a part).
+        let m = strip(8, 4, |s, t| [2.0 * s, t, 0.0], |s, t| [s, t]);
+        let cell = |f: u32| (f / 2 % 8, f / 16);
+        let faces = 0..m.triangles.len() as u32;
+        whole_patch(&m, |patch, _| {
+            let halves: Vec<Vec<u32>> = vec![
+                faces.clone().filter(|&f| cell(f).0 < 4).collect(),
+                faces.clone().filter(|&f| cell(f).0 >= 4).collect(),
+            ];
+            assert!((patch.cut_length(&halves) - 1.0).abs() < 1e-12, "{}", patch.cut_length(&halves));
+            let columns: Vec<Vec<u32>> =
+                (0..2).map(|r| faces.clone().filter(|&f| cell(f).0 % 2 == r).collect()).collect();
+            assert!((patch.cut_length(&columns) - 7.0).abs() < 1e-12, "{}", patch.cut_length(&columns));
+            let with_empty = [halves.clone(), vec![Vec::new()]].concat();
+            assert_eq!(patch.cut_length(&with_empty), patch.cut_length(&halves));
+            assert_eq!(patch.cut_length(&[faces.clone().collect()]), 0.0);
+        });
+    }
+
+    #[test]
+    fn a_split_into_many_parts_with_long_seams_is_ragged() {
+        // A flat 4 × 0.5 strip of 16 × 2 cells. Its halves are cut across it (about 0.5 long);
+        // its 16 columns of cells are 15 cuts of 0.5 (7.5, over 8 times the halves' cut): ragged.
+        // Four blocks of four columns (three cuts, 1.5) are not, nor are the two halves.
+        let m = strip(16, 2, |s, t| [4.0 * s, 0.5 * t, 0.0], |s, t| [s, t]);
+        let faces = 0..m.triangles.len() as u32;
+        let by = |k: u32, of: fn(u32) -> u32| -> Vec<Vec<u32>> {
+            (0..k).map(|r| faces.clone().filter(|&f| of(f) == r).collect()).collect()
+        };
+        whole_patch(&m, |patch, _| {
+            let halves = patch.halves();
+            let across = patch.cut_length(&halves);
+            assert!((0.5..1.0).contains(&across), "the halves' cut: {across}");
+            let columns = by(16, |f| f / 2 % 16);
+            assert!((patch.cut_length(&columns) - 7.5).abs() < 1e-12);
+            assert!(patch.is_ragged(&columns));
+            let blocks = by(4, |f| f / 2 % 16 / 4);
+            assert!(!patch.is_ragged(&blocks));
+            assert!(!patch.is_ragged(&halves));
         });
     }
 
