@@ -19,7 +19,7 @@ use nuvo_atlas::load::load_mesh_with_uv;
 use nuvo_atlas::metrics::{EvalOptions, boundary_pixels};
 use nuvo_atlas::orbit_views;
 use nuvo_atlas::render::render;
-use nuvo_atlas::uvstats::uv_charts;
+use nuvo_atlas::uvstats::{Dsu, uv_charts};
 
 const SIZES: [&str; 5] = ["< 10", "10–99", "100–999", "1k–10k", "≥ 10k"];
 
@@ -34,31 +34,21 @@ fn size_class(faces: usize) -> usize {
 }
 
 /// Per face, its piece: faces joined through vertices at bit-identical positions.
-fn pieces(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Vec<usize> {
-    let mut id: HashMap<[u32; 3], usize> = HashMap::new();
-    let vertex: Vec<usize> = positions
+fn pieces(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Vec<u32> {
+    let mut id: HashMap<[u32; 3], u32> = HashMap::new();
+    let vertex: Vec<u32> = positions
         .iter()
         .map(|p| {
-            let next = id.len();
+            let next = id.len() as u32;
             *id.entry(p.map(f32::to_bits)).or_insert(next)
         })
         .collect();
-    let mut parent: Vec<usize> = (0..id.len()).collect();
-    fn root(parent: &mut [usize], mut x: usize) -> usize {
-        while parent[x] != x {
-            parent[x] = parent[parent[x]];
-            x = parent[x];
-        }
-        x
-    }
+    let mut dsu = Dsu::new(id.len());
     for t in triangles {
-        let a = root(&mut parent, vertex[t[0] as usize]);
-        for &c in &t[1..] {
-            let b = root(&mut parent, vertex[c as usize]);
-            parent[b.max(a)] = a.min(b);
-        }
+        dsu.union(vertex[t[0] as usize], vertex[t[1] as usize]);
+        dsu.union(vertex[t[0] as usize], vertex[t[2] as usize]);
     }
-    triangles.iter().map(|t| root(&mut parent, vertex[t[0] as usize])).collect()
+    triangles.iter().map(|t| dsu.find(vertex[t[0] as usize])).collect()
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -71,7 +61,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         island_faces[i as usize] += 1;
     }
     let piece = pieces(&mesh.positions, &mesh.triangles);
-    let mut piece_faces: HashMap<usize, usize> = HashMap::new();
+    let mut piece_faces: HashMap<u32, usize> = HashMap::new();
     for &p in &piece {
         *piece_faces.entry(p).or_default() += 1;
     }

@@ -443,17 +443,24 @@ mod tests {
         assert_close("editability", r.editability, 1.0, 1e-4);
     }
 
+    /// The plane [-1, 1]² (10 × 10 cells) mapped onto [0, 1]², and the same with the faces left
+    /// of x = 0 moved by `du` in u: two islands with a seam along x = 0.
+    fn left_half_moved(du: f32) -> (TriMesh, TriMesh) {
+        let m = grid(10, |p| [(p[0] + 1.0) * 0.5, (p[1] + 1.0) * 0.5]);
+        let halves = with_uv_per_corner(&m, |f, _, uv| {
+            let left = m.corners(f).iter().all(|c| c[0] <= 0.0);
+            if left { [uv[0] + du, uv[1]] } else { uv }
+        });
+        (m, halves)
+    }
+
     #[test]
     fn unpacked_editability_counts_a_seam_between_islands_however_close_they_lie() {
         // Head-on 200² over [-1, 1]²: the seam x = 0 falls between pixel columns 99 and 100. The
         // left half moved 0.05 in u is an island of its own, closer than `uv_jump` to the right
         // half: measured, no pixel is a boundary pixel; unpacked, both columns along the seam
         // are (400 of 40,000 pixels), and Stretch and Conformal stay 1.
-        let m = grid(10, |p| [(p[0] + 1.0) * 0.5, (p[1] + 1.0) * 0.5]);
-        let halves = with_uv_per_corner(&m, |f, _, uv| {
-            let left = m.corners(f).iter().all(|c| c[0] <= 0.0);
-            if left { [uv[0] + 0.05, uv[1]] } else { uv }
-        });
+        let (m, halves) = left_half_moved(0.05);
         let params = ImageParams::default();
         assert_close("measured", image_metrics(&halves, &head_on(), &params).unwrap().editability, 1.0, 1e-9);
         let got = unpacked_editability(&halves, &[&m, &halves], &head_on(), &params).unwrap();
@@ -468,11 +475,7 @@ mod tests {
         // Head-on 200² over [-1, 1]²: the seam x = 0 falls between pixel columns 99 and 100. The
         // left half moved 1.0 in u: columns 99 and 100 are boundary pixels, each made one by its
         // neighbour across the seam (right of column 99, left of column 100), and no other pixel.
-        let m = grid(10, |p| [(p[0] + 1.0) * 0.5, (p[1] + 1.0) * 0.5]);
-        let halves = with_uv_per_corner(&m, |f, _, uv| {
-            let left = m.corners(f).iter().all(|c| c[0] <= 0.0);
-            if left { [uv[0] + 1.0, uv[1]] } else { uv }
-        });
+        let (m, halves) = left_half_moved(1.0);
         let g = render(&halves, &head_on()[0]).unwrap();
         let uv = halves.uv.as_ref().unwrap();
         let got = boundary_pixels(uv, None, &g, &ImageParams::default());

@@ -379,14 +379,17 @@ fn ids(flags: impl Iterator<Item = bool>) -> Vec<u32> {
 }
 
 /// Union–find with path halving; unions keep the smaller root so labels are order-independent.
-/// Shared by the UV statistics and the refinement's island splits.
-pub(crate) struct Dsu(Vec<u32>);
+/// Shared by the UV statistics, the refinement's island splits and `injective`, and public for
+/// the `boundary_sources` example's mesh pieces.
+pub struct Dsu(Vec<u32>);
 
 impl Dsu {
-    pub(crate) fn new(n: usize) -> Self {
+    /// `n` singletons.
+    pub fn new(n: usize) -> Self {
         Dsu((0..n as u32).collect())
     }
-    pub(crate) fn find(&mut self, mut x: u32) -> u32 {
+    /// The root of `x`'s set (the smallest member ever made a root).
+    pub fn find(&mut self, mut x: u32) -> u32 {
         while self.0[x as usize] != x {
             let p = self.0[x as usize];
             self.0[x as usize] = self.0[p as usize];
@@ -394,7 +397,8 @@ impl Dsu {
         }
         x
     }
-    pub(crate) fn union(&mut self, a: u32, b: u32) {
+    /// Joins the sets of `a` and `b`.
+    pub fn union(&mut self, a: u32, b: u32) {
         let (ra, rb) = (self.find(a), self.find(b));
         let (lo, hi) = (ra.min(rb), ra.max(rb));
         self.0[hi as usize] = lo;
