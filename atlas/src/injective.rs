@@ -122,10 +122,14 @@
 
 use foldhash::{HashMap, HashMapExt, HashSet, HashSetExt};
 
+use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::solvers::Solve;
-use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
+use faer::sparse::linalg::SupernodalThreshold;
+use faer::sparse::linalg::cholesky::{
+    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering, factorize_symbolic_cholesky,
+};
 use faer::sparse::{SparseColMat, SymbolicSparseColMat, Triplet};
-use faer::{Mat, Side};
+use faer::{Conj, Mat, Par, Side};
 use nuvo_geometry::{TriMesh, UvLayer};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -2482,6 +2486,13 @@ fn slim_terms(rest: &Rest, q: [[f64; 2]; 3]) -> Option<([[f64; 6]; 4], [f64; 4])
 /// set of triangles and refilled every round: building it (sorting the entries, the ordering,
 /// the symbolic analysis) cost over twice what the numeric factorisation does, measured on the
 /// bunny's bake.
+///
+/// The factorisation is always supernodal (faer's default picks simplicial for these sparse
+/// systems by their flop ratio): measured on the Common Shapes bunny's bake, `injective` took
+/// 5.6 s simplicial and 3.8 s supernodal, the necks pass 5.7 and 4.6 s, with the same atlas; the
+/// unruly bunny's thousands of small islands lost nothing (BENCHMARKS.md). It runs sequentially
+/// (`Par::Seq`) inside each island, as islands are solved in parallel, so the result does not
+/// depend on the thread count.
 struct Pattern {
     matrix: SparseColMat<usize, f64>,
     /// Per triangle, the value index of each `(x, y)` pair of its 6 local unknowns (`u` of
@@ -2491,7 +2502,11 @@ struct Pattern {
     slots: Vec<[[usize; 6]; 6]>,
     /// The value index of each diagonal entry.
     diagonal: Vec<usize>,
-    symbolic: SymbolicLlt<usize>,
+    symbolic: SymbolicCholesky<usize>,
+    /// The factor's values, refilled by every numeric factorisation.
+    factor: Vec<f64>,
+    /// Scratch space of the numeric factorisation and the solve.
+    scratch: MemBuffer,
 }
 
 impl Pattern {
@@ -2538,8 +2553,39 @@ impl Pattern {
             })
             .collect();
         let diagonal = (0..2 * n).map(|i| find(i, i)).collect();
-        let symbolic = SymbolicLlt::try_new(matrix.symbolic(), Side::Lower).ok()?;
-        Some(Pattern { matrix, slots, diagonal, symbolic })
+        let params = CholeskySymbolicParams {
+            supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+            ..Default::default()
+        };
+        let symbolic =
+            factorize_symbolic_cholesky(matrix.symbolic(), Side::Lower, SymmetricOrdering::Amd, params)
+                .ok()?;
+        let factor = vec![0.0; symbolic.len_val()];
+        let req = symbolic
+            .factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default())
+            .or(symbolic.solve_in_place_scratch::<f64>(1, Par::Seq));
+        let scratch = MemBuffer::try_new(req).ok()?;
+        Some(Pattern { matrix, slots, diagonal, symbolic, factor, scratch })
+    }
+
+    /// Factorises the matrix as its values stand and solves `matrix · x = rhs` in place; `None`
+    /// when the matrix is not positive definite.
+    fn solve_in_place(&mut self, rhs: &mut Mat<f64>) -> Option<()> {
+        let Pattern { matrix, symbolic, factor, scratch, .. } = self;
+        symbolic
+            .factorize_numeric_llt(
+                factor,
+                matrix.as_ref(),
+                Side::Lower,
+                Default::default(),
+                Par::Seq,
+                MemStack::new(scratch),
+                Default::default(),
+            )
+            .ok()?;
+        let llt = LltRef::new(symbolic, factor);
+        llt.solve_in_place_with_conj(Conj::No, rhs.as_mut(), Par::Seq, MemStack::new(scratch));
+        Some(())
     }
 }
 
@@ -2659,9 +2705,7 @@ fn solve<'r>(
     for &d in &pattern.diagonal {
         vals[d] += proximal;
     }
-    let llt =
-        Llt::try_new_with_symbolic(pattern.symbolic.clone(), pattern.matrix.as_ref(), Side::Lower).ok()?;
-    llt.solve_in_place(rhs.as_mut());
+    pattern.solve_in_place(&mut rhs)?;
     Some(rhs)
 }
 
@@ -2865,6 +2909,49 @@ mod tests {
         // The two rounds did solve different systems.
         assert_ne!(step0, step1);
         assert_ne!(island0, island1);
+    }
+
+    #[test]
+    fn a_pattern_solves_its_system_as_a_plain_cholesky_does() {
+        // The SLIM pattern of a 12 × 12 grid, filled with a positive definite matrix (each
+        // entry's value from its position, diagonally dominant), solved through the kept
+        // symbolic factorisation and by a fresh `sp_cholesky` of the same entries.
+        let mesh = grid(12, |p| [p[0], p[1]]);
+        let n = mesh.positions.len();
+        let mut pattern = Pattern::new(n, &mesh.triangles).unwrap();
+        let col_ptr = pattern.matrix.symbolic().col_ptr().to_vec();
+        let row_idx = pattern.matrix.symbolic().row_idx().to_vec();
+        let value = |r: usize, col: usize| {
+            if r == col { 40.0 + (col % 7) as f64 } else { -1.0 - ((r + 3 * col) % 5) as f64 * 0.1 }
+        };
+        let mut triplets = Vec::new();
+        let vals = pattern.matrix.val_mut();
+        for col in 0..2 * n {
+            for k in col_ptr[col]..col_ptr[col + 1] {
+                vals[k] = value(row_idx[k], col);
+                triplets.push(Triplet::new(row_idx[k], col, vals[k]));
+            }
+        }
+        let rhs = Mat::<f64>::from_fn(2 * n, 1, |i, _| ((i * 37) % 11) as f64 - 5.0);
+        let mut ours = rhs.clone();
+        pattern.solve_in_place(&mut ours).unwrap();
+        let mut plain = rhs.clone();
+        solve_lower(2 * n, &triplets, &mut plain).unwrap();
+        for i in 0..2 * n {
+            assert!(
+                (ours[(i, 0)] - plain[(i, 0)]).abs() < 1e-10,
+                "row {i}: {} vs {}",
+                ours[(i, 0)],
+                plain[(i, 0)]
+            );
+        }
+        // Refilled with twice the values, the same pattern solves the new system: half the solution.
+        pattern.matrix.val_mut().iter_mut().for_each(|v| *v *= 2.0);
+        let mut halved = rhs.clone();
+        pattern.solve_in_place(&mut halved).unwrap();
+        for i in 0..2 * n {
+            assert!((2.0 * halved[(i, 0)] - plain[(i, 0)]).abs() < 1e-10, "row {i}");
+        }
     }
 
     /// A strip of `n × m` quads on a surface `pos(s, t)` over `[0,1]²`, UVs `uv(s, t)`.
