@@ -28,13 +28,14 @@
 //! with one `vt` per corner; `atlas.glb` splits vertices on seams, and `vertex_map.json` says which
 //! input vertex each of its vertices is.
 
+use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 
 use nuvo_atlas::AtlasError;
 use nuvo_atlas::bake::{BakeOptions, BakeReport, ChartFields, RoundTrip, argmax, bake, chart_uv};
 use nuvo_atlas::camera::orbit_views;
 use nuvo_atlas::export::{GlbOptions, glb_vertex_map, write_glb, write_obj};
-use nuvo_atlas::injective::{InjectiveOptions, InjectiveReport, make_injective};
+use nuvo_atlas::injective::{InjectiveOptions, InjectiveReport, make_injective, make_injective_where};
 use nuvo_atlas::islands::{IslandPacking, pack_islands};
 use nuvo_atlas::join::{JoinOptions, JoinReport, join_small_islands};
 use nuvo_atlas::metrics::{EvalOptions, Metrics, evaluate};
@@ -46,7 +47,7 @@ use nuvo_atlas::pictures::{
 };
 use nuvo_atlas::refine::{RefineOptions, RefineReport, refine_islands};
 use nuvo_atlas::texture::{SurfaceColour, TextureOptions, TextureReport, bake_texture};
-use nuvo_atlas::uvstats::{UvAnalysis, analyse_uv};
+use nuvo_atlas::uvstats::{UvAnalysis, analyse_uv, uv_islands};
 use nuvo_geometry::appearance::{Colours, NearestColour, SurfaceColours, load_colours};
 use nuvo_geometry::{GeometryError, GeometrySource, Similarity, TriMesh};
 use serde::Serialize;
@@ -205,8 +206,13 @@ fn finish_layout(
             let mut cut = necked.mesh;
             if opts.injective {
                 // A cut frees the parts' boundary where they were joined: SLIM relaxes them from
-                // their maps (the other islands are already converged and stop after one round).
-                cut = make_injective(&cut, &injective_options(opts))?.mesh;
+                // their maps. The islands no cut touched are already converged and keep their UVs.
+                let uncut: HashSet<Vec<u32>> = match &mesh.uv {
+                    Some(uv) => uv_islands(&mesh, uv).into_iter().collect(),
+                    None => HashSet::new(),
+                };
+                let opts = injective_options(opts);
+                cut = make_injective_where(&cut, &opts, |faces| !uncut.contains(faces))?.mesh;
             }
             if judge_cuts(&mesh, &cut, &neck_options, &mut necked.report)? {
                 mesh = cut;
