@@ -2525,8 +2525,9 @@ fn slim_terms(rest: &Rest, q: [[f64; 2]; 3]) -> Option<([[f64; 6]; 4], [f64; 4])
 ///
 /// The factorisation is always supernodal (faer's default picks simplicial for these sparse
 /// systems by their flop ratio): measured on the Common Shapes bunny's bake, `injective` took
-/// 5.6 s simplicial and 3.8 s supernodal, the necks pass 5.7 and 4.6 s, with the same atlas; the
-/// unruly bunny's thousands of small islands lost nothing (BENCHMARKS.md). It runs sequentially
+/// 5.6 s simplicial and 3.8 s supernodal, the necks pass 5.7 and 4.6 s, with the same atlas;
+/// the fragmented inputs' thousands of small islands took no longer, and their scores moved by
+/// the other rounding's later choices (−0.0003 to −0.0005, BENCHMARKS.md). It runs sequentially
 /// (`Par::Seq`) inside each island, as islands are solved in parallel, so the result does not
 /// depend on the thread count.
 struct Pattern {
