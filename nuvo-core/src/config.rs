@@ -293,6 +293,11 @@ pub struct OutputConfig {
     /// are split (BENCHMARKS.md, "Injective islands on fragmented meshes" and "Splitting the
     /// discs SLIM could not flatten").
     pub injective_split_energy: f64,
+    /// With `injective`: the weight of the conformal term SLIM minimises with the symmetric
+    /// Dirichlet energy (`nuvo_atlas::injective::InjectiveOptions::conformal`): 0 balances angle
+    /// and area distortion as the symmetric Dirichlet energy does, a larger weight keeps angles
+    /// (PartUV's angular score) at the cost of area.
+    pub injective_conformal: f64,
     /// With `injective`: cut each solved island open from its cone points (where the surface
     /// gathers an angle deficit that no flat map holds without distortion) to its boundary, and
     /// keep the cuts where SLIM then lowers the island's distortion enough (not in the paper;
@@ -356,6 +361,7 @@ impl Default for OutputConfig {
             refine: false,
             injective: false,
             injective_split_energy: nuvo_atlas::injective::SPLIT_ENERGY,
+            injective_conformal: 0.0,
             join: false,
             cut_necks: false,
             cut_cones: false,
@@ -845,6 +851,9 @@ impl OutputConfig {
                 "must be a positive energy per unit area (4 is an isometry) or inf (never split)",
             ));
         }
+        if !(out.injective_conformal.is_finite() && out.injective_conformal >= 0.0) {
+            return Err(src.invalid("output.injective_conformal", "must be 0 (off) or a positive weight"));
+        }
         if out.gutter.saturating_mul(4) >= out.atlas_resolution {
             return Err(
                 src.invalid("output.gutter", "leaves no room for the charts at this atlas resolution")
@@ -977,6 +986,17 @@ mod tests {
         for bad in ["0.0", "-1.0", "nan"] {
             let e = out(&format!("injective_split_energy = {bad}\n")).unwrap_err();
             assert!(e.to_string().contains("output.injective_split_energy"), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn injective_conformal_is_off_by_default_and_checked() {
+        let out = |extra: &str| from_str("c.toml", &format!("{MINIMAL}[output]\n{extra}"));
+        assert_eq!(out("").unwrap().config.output.injective_conformal, 0.0);
+        assert_eq!(out("injective_conformal = 2.0\n").unwrap().config.output.injective_conformal, 2.0);
+        for bad in ["-1.0", "nan", "inf"] {
+            let e = out(&format!("injective_conformal = {bad}\n")).unwrap_err();
+            assert!(e.to_string().contains("output.injective_conformal"), "{bad}: {e}");
         }
     }
 

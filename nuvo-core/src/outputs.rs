@@ -242,7 +242,12 @@ fn checker_cells(columns: u32) -> u32 {
 fn injective_options(opts: &OutputConfig) -> InjectiveOptions {
     // Split parts lie on each other until packed, so only island packing may split.
     let split = opts.packing == Packing::Islands;
-    InjectiveOptions { split, split_energy: opts.injective_split_energy, ..Default::default() }
+    InjectiveOptions {
+        split,
+        split_energy: opts.injective_split_energy,
+        conformal: opts.injective_conformal,
+        ..Default::default()
+    }
 }
 
 /// What `metrics.json` holds.
