@@ -11,11 +11,17 @@ use rayon::prelude::*;
 use crate::shape::Shape;
 
 /// Elementwise loops shorter than this run on one thread: below it the fork/join overhead dominates.
-pub(crate) const PAR_MIN_LEN: usize = 1 << 15;
+/// 4096: the per-chart rows of a training step (a few hundred rows, narrow columns) are mostly
+/// below the 32k this was before, and left the second core idle (BENCHMARKS.md, "Finer blocks for
+/// the training step").
+pub(crate) const PAR_MIN_LEN: usize = 1 << 12;
 /// Chunk length of parallel elementwise loops.
-const PAR_CHUNK: usize = 1 << 13;
-/// Rows per block in reductions (fixed, so the summation order never depends on the thread count).
-const REDUCE_BLOCK_ROWS: usize = 512;
+const PAR_CHUNK: usize = 1 << 11;
+/// Rows per block in reductions (fixed, so the summation order never depends on the thread count),
+/// and so in the fused linear layer's row-block loops ([`ROW_BLOCK`]). 256: a chart's support of
+/// 600–900 rows made two 512-row blocks, one three times the other, so one core waited; 256 keeps
+/// the big layers' GEMMs as fast (BENCHMARKS.md, "Finer blocks for the training step").
+const REDUCE_BLOCK_ROWS: usize = 256;
 
 /// A read-only matrix view with arbitrary strides, so transposes are free.
 #[derive(Clone, Copy)]
