@@ -759,26 +759,22 @@ fn is_positive(x: f64) -> bool {
 
 /// The symmetric Dirichlet energy density `‖J‖² + ‖J⁻¹‖²` (infinite unless `det J > 0`).
 fn sym_dirichlet(j: [[f64; 2]; 2]) -> f64 {
+    slim_density(j, 0.0)
+}
+
+/// The density SLIM minimises on a face with a 3-D area: the symmetric Dirichlet energy
+/// `‖J‖² + ‖J⁻¹‖² = ‖J‖² + ‖J‖²/det²` plus `conformal` times the conformal (MIPS) excess
+/// `σ₁/σ₂ + σ₂/σ₁ − 2 = ‖J‖²/det J − 2` (0 for a similarity); infinite unless `det J > 0`. 4 for
+/// an isometry whatever the weight, so every threshold stated against an isometry's energy keeps
+/// its meaning.
+fn slim_density(j: [[f64; 2]; 2], conformal: f64) -> f64 {
     let det = j[0][0] * j[1][1] - j[0][1] * j[1][0];
     if !is_positive(det) {
         return f64::INFINITY;
     }
     let f = j[0][0] * j[0][0] + j[0][1] * j[0][1] + j[1][0] * j[1][0] + j[1][1] * j[1][1];
-    f + f / (det * det)
-}
-
-/// The density SLIM minimises on a face with a 3-D area: the symmetric Dirichlet energy plus
-/// `conformal` times the conformal (MIPS) excess `σ₁/σ₂ + σ₂/σ₁ − 2 = ‖J‖²/det J − 2` (0 for a
-/// similarity; infinite unless `det J > 0`). 4 for an isometry whatever the weight, so every
-/// threshold stated against an isometry's energy keeps its meaning.
-fn slim_density(j: [[f64; 2]; 2], conformal: f64) -> f64 {
-    let sd = sym_dirichlet(j);
-    if conformal == 0.0 || !sd.is_finite() {
-        return sd;
-    }
-    let det = j[0][0] * j[1][1] - j[0][1] * j[1][0];
-    let f = j[0][0] * j[0][0] + j[0][1] * j[0][1] + j[1][0] * j[1][0] + j[1][1] * j[1][1];
-    sd + conformal * (f / det - 2.0).max(0.0)
+    let sd = f + f / (det * det);
+    if conformal == 0.0 { sd } else { sd + conformal * (f / det - 2.0).max(0.0) }
 }
 
 /// The signed SVD `J = rot(φ) diag(s1, s2) rot(θ)` of a 2×2 matrix (`s1 ≥ |s2|`, `s2 < 0` iff
@@ -1059,28 +1055,19 @@ impl Patch {
         (self.topology.loops.is_empty() || ccw == 1) && !boundary_crosses(&self.topology.loops, p)
     }
 
-    /// Σ weight × symmetric Dirichlet over live faces; `None` when some face is not positive.
+    /// Σ weight × symmetric Dirichlet over the live faces with a 3-D area (what the reports and
+    /// the split and cone decisions read); `None` when some live face is not positive.
     fn energy(&self, p: &[[f64; 2]]) -> Option<f64> {
-        self.energy_of(p, false)
+        self.energy_of(p, false, 0.0)
     }
 
-    fn energy_of(&self, p: &[[f64; 2]], all: bool) -> Option<f64> {
-        let mut e = 0.0;
-        for (t, c) in self.live() {
-            let d = sym_dirichlet(self.rest[t].jacobian(c.map(|i| p[i as usize])));
-            if !d.is_finite() {
-                return None;
-            }
-            if all || self.rest[t].real {
-                e += self.rest[t].weight * d;
-            }
-        }
-        Some(e)
-    }
-
-    /// What SLIM minimises ([`slim_density`] × weight over every live face; the conformal term
-    /// only on faces with a 3-D area); `None` when some face is not positive.
+    /// What SLIM minimises: [`slim_density`] × weight over every live face, the conformal term
+    /// only on faces with a 3-D area; `None` when some face is not positive.
     fn objective(&self, p: &[[f64; 2]], conformal: f64) -> Option<f64> {
+        self.energy_of(p, true, conformal)
+    }
+
+    fn energy_of(&self, p: &[[f64; 2]], all: bool, conformal: f64) -> Option<f64> {
         let mut e = 0.0;
         for (t, c) in self.live() {
             let rest = &self.rest[t];
@@ -1088,7 +1075,9 @@ impl Patch {
             if !d.is_finite() {
                 return None;
             }
-            e += rest.weight * d;
+            if all || rest.real {
+                e += rest.weight * d;
+            }
         }
         Some(e)
     }
