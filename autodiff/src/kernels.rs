@@ -19,7 +19,7 @@ pub(crate) const PAR_MIN_LEN: usize = 1 << 12;
 const PAR_CHUNK: usize = 1 << 11;
 /// Rows per block in reductions (fixed, so the summation order never depends on the thread count),
 /// and so in the fused linear layer's row-block loops ([`ROW_BLOCK`]). 256: a chart's support of
-/// 600–900 rows made two 512-row blocks, one three times the other, so one core waited; 256 keeps
+/// 550–900 rows made two 512-row blocks, one up to ten times the other, so one core waited; 256 keeps
 /// the big layers' GEMMs as fast (BENCHMARKS.md, "Finer blocks for the training step").
 const REDUCE_BLOCK_ROWS: usize = 256;
 
