@@ -40,8 +40,8 @@ pub struct UnwrapArgs {
     /// Number of charts, or `auto` to choose it from the shape.
     #[arg(long, default_value = "auto")]
     charts: String,
-    /// Seconds of training; the step count is fitted to it on this machine (then fixed in
-    /// config.toml, so `nuvo train` reproduces the run).
+    /// Seconds of training at most: the step count (400 on a machine fast enough) is cut to fit
+    /// it on this machine (then fixed in config.toml, so `nuvo train` reproduces the run).
     #[arg(long, default_value_t = DEFAULT_TIME_BUDGET)]
     time_budget: f64,
     /// Seed of every random choice.
