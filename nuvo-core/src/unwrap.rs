@@ -420,7 +420,7 @@ pub const MEAN_STEP_COST: f64 = 0.8;
 pub const MIN_STEPS: u64 = 300;
 /// Most steps a fitted run gets: the plan of every machine fast enough to train this many
 /// steps within the budget, so the budget is only a cap and the same input gives the same
-/// config (and atlas) on a fast CPU as on a slower one. The warm start (30% of the plan) and the
+/// config on a fast CPU as on a slower one. The warm start (30% of the plan) and the
 /// learning-rate schedule follow the plan; a longer plan made a faster CPU train longer, since
 /// its charts settled later. Common Shapes with the plan at 400 against the plans the budget
 /// gave on a Zen 1 (300–550 steps for several charts, 1150–2000 for one or two): mean
