@@ -428,9 +428,11 @@ pub const MIN_STEPS: u64 = 300;
 /// in score at a third of the time (BENCHMARKS.md, "A plan of at most 400 steps").
 pub const MAX_STEPS: u64 = 400;
 
-/// Times [`TIMED_STEPS`] steps of `trainer` (at step 0) one by one, puts it back as it was, and
-/// returns the step count that fits `budget_seconds` at the fastest of them (rounded down to a
-/// multiple of 50, so timing noise rarely changes it; within [`MIN_STEPS`]`..=`[`MAX_STEPS`]).
+/// Times up to [`TIMED_STEPS`] steps of `trainer` (at step 0) one by one, puts it back as it
+/// was, and returns the step count that fits `budget_seconds` at the fastest of them (rounded
+/// down to a multiple of 50, so timing noise rarely changes it; within
+/// [`MIN_STEPS`]`..=`[`MAX_STEPS`]). Timing stops as soon as one step fits the cap: the plan is
+/// then [`MAX_STEPS`] whatever the later steps take.
 /// The fastest, not the mean: on a shared machine a few steps run 30–80% slow now and then, and
 /// the mean of eight moved the plan of one input between 350 and 500 steps from run to run
 /// (fastest step: within 14%). The caller builds the run's trainer with it, since the warm
@@ -441,18 +443,21 @@ pub fn fit_steps(trainer: &mut Trainer, budget_seconds: f64) -> Result<(u64, Dec
     trainer.time_full_batches(true);
     // One untimed step first: it allocates the tape's buffers.
     trainer.step()?;
-    let mut per_step = f64::INFINITY;
-    for _ in 0..TIMED_STEPS {
+    let (mut per_step, mut timed) = (f64::INFINITY, 0);
+    // Any step's time bounds the fastest from above, so once one step shows that the cap fits,
+    // more timing cannot change the plan.
+    while timed < TIMED_STEPS && steps_for(budget_seconds, per_step) < MAX_STEPS {
         let t = Instant::now();
         trainer.step()?;
         per_step = per_step.min(t.elapsed().as_secs_f64());
+        timed += 1;
     }
     trainer.time_full_batches(false);
     trainer.restore(&start)?;
     let steps = steps_for(budget_seconds, per_step);
     let settles = trainer.settling_threshold().is_some();
     let why = format!(
-        "{}{:.0} ms for the fastest of {TIMED_STEPS} steps timed at the start (≈{:.0} ms on average over a \
+        "{}{:.0} ms for the fastest of {timed} steps timed at the start (≈{:.0} ms on average over a \
          run), {budget_seconds:.0} s of \
          training budget, at most {MAX_STEPS} steps on any machine{}",
         if settles { "at most: " } else { "" },
@@ -620,6 +625,36 @@ mod tests {
         assert!(t[0].coverage.supervised < 0.55, "{t:?}");
         assert!(t[1].coverage.supervised > 0.95, "{t:?}");
         assert_eq!(choose_charts(&t).0, 2);
+    }
+
+    #[test]
+    fn timing_stops_once_one_step_fits_the_cap() {
+        use nuvo_geometry::BuildContext;
+        use nuvo_geometry::mesh_source::{MeshOptions, MeshSource};
+        let opts = MeshOptions {
+            path: "box".into(),
+            sampling: SamplingMode::Uniform,
+            normals: Default::default(),
+            flip_normals: false,
+            cameras: None,
+        };
+        let ctx = BuildContext { base_dir: ".".into() };
+        let source = MeshSource::from_mesh("box".into(), slab([1.0, 0.5, 0.25]), &opts, &ctx).unwrap();
+        let text = "[geometry]\nsource = \"mesh\"\npath = \"box.obj\"\n\
+                    [model]\ndepth = 2\nwidth = 8\ngrid_resolution = 4\n\
+                    [training]\nsteps = 10\nbatch_3d = 64\nbatch_uv = 64\n";
+        let loaded = crate::config::from_str("box.toml", text).unwrap();
+        let losses = nuvo_losses::LossRegistry::with_builtins();
+        let mut trainer = Trainer::with_source(&loaded, Box::new(source), &losses).unwrap();
+        // A budget that any step fits 400 times over: the first timed step decides.
+        let (steps, d) = fit_steps(&mut trainer, 1e9).unwrap();
+        assert_eq!(steps, MAX_STEPS);
+        assert!(d.why.contains("fastest of 1 steps"), "{}", d.why);
+        // A budget that no step fits: every step is timed, and the floor holds.
+        let (steps, d) = fit_steps(&mut trainer, 1e-9).unwrap();
+        assert_eq!(steps, MIN_STEPS);
+        assert!(d.why.contains(&format!("fastest of {TIMED_STEPS} steps")), "{}", d.why);
+        assert_eq!(trainer.step_index(), 0, "the trainer is put back as it was");
     }
 
     #[test]
