@@ -578,7 +578,8 @@ mod tests {
         nuvo_geometry::testdata::closed_box([0.0; 3], half)
     }
 
-    fn trials_on(mesh: TriMesh) -> Vec<ChartTrial> {
+    /// `mesh` as a source sampled by area, as `nuvo unwrap` builds one for a clean mesh.
+    fn uniform_source(mesh: TriMesh) -> nuvo_geometry::mesh_source::MeshSource {
         use nuvo_geometry::BuildContext;
         use nuvo_geometry::mesh_source::{MeshOptions, MeshSource};
         let opts = MeshOptions {
@@ -589,8 +590,11 @@ mod tests {
             cameras: None,
         };
         let ctx = BuildContext { base_dir: ".".into() };
-        let source = MeshSource::from_mesh("test".into(), mesh, &opts, &ctx).unwrap();
-        chart_trials(&source, 7).unwrap()
+        MeshSource::from_mesh("test".into(), mesh, &opts, &ctx).unwrap()
+    }
+
+    fn trials_on(mesh: TriMesh) -> Vec<ChartTrial> {
+        chart_trials(&uniform_source(mesh), 7).unwrap()
     }
 
     #[test]
@@ -629,17 +633,7 @@ mod tests {
 
     #[test]
     fn timing_stops_once_one_step_fits_the_cap() {
-        use nuvo_geometry::BuildContext;
-        use nuvo_geometry::mesh_source::{MeshOptions, MeshSource};
-        let opts = MeshOptions {
-            path: "box".into(),
-            sampling: SamplingMode::Uniform,
-            normals: Default::default(),
-            flip_normals: false,
-            cameras: None,
-        };
-        let ctx = BuildContext { base_dir: ".".into() };
-        let source = MeshSource::from_mesh("box".into(), slab([1.0, 0.5, 0.25]), &opts, &ctx).unwrap();
+        let source = uniform_source(slab([1.0, 0.5, 0.25]));
         let text = "[geometry]\nsource = \"mesh\"\npath = \"box.obj\"\n\
                     [model]\ndepth = 2\nwidth = 8\ngrid_resolution = 4\n\
                     [training]\nsteps = 10\nbatch_3d = 64\nbatch_uv = 64\n";
