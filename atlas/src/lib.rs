@@ -15,6 +15,7 @@
 //! | [`uvstats`] | charts, flips, utilisation and overlaps of a UV layout |
 //! | [`partuv`] | the PartUV comparison's charts, seams, angular score, area distortions, packing |
 //! | [`necks`] | cutting islands at their necks where the packer says the atlas gets tighter |
+//! | [`creases`] | cutting islands along sharp creases where the renders say the atlas gains |
 //! | [`join`] | joining small islands into a neighbouring one where that stays injective |
 //! | [`refine`] | local/global ARAP refinement of each UV island from its current UVs, never adding flips |
 //! | [`injective`] | every island made injective (no flip, no self-overlap) and its distortion lowered by SLIM |
@@ -29,6 +30,7 @@
 
 pub mod bake;
 pub mod camera;
+pub mod creases;
 pub mod enclaves;
 pub mod error;
 pub mod export;

@@ -309,6 +309,13 @@ pub struct OutputConfig {
     /// result stays injective. Runs after `injective`; off by default, on in `nuvo unwrap`
     /// wherever `injective` is.
     pub join: bool,
+    /// With `injective`: chart the surface by its sharp creases (normals more than 60° apart;
+    /// regions under 2% of the area join a neighbour), make those charts injective as the
+    /// networks' islands were, and keep them instead of the networks' layout where the
+    /// Editability estimated from renders other than the evaluation's is higher, both packed
+    /// (not in the paper; `nuvo_atlas::creases`): a machined part's patches flatten to
+    /// isometries. Runs after `join`; off by default, on in `nuvo unwrap`.
+    pub crease_charts: bool,
     /// With `packing = "islands"`: cut islands across their necks where the atlas then packs
     /// tighter (not in the paper; `nuvo_atlas::necks`): cuts are tried greedily on the islands
     /// that waste most of their bounding rectangle and kept only when a trial packing gains in
@@ -363,6 +370,7 @@ impl Default for OutputConfig {
             injective_split_energy: nuvo_atlas::injective::SPLIT_ENERGY,
             injective_conformal: 0.0,
             join: false,
+            crease_charts: false,
             cut_necks: false,
             cut_cones: false,
             packing: Packing::Squares,

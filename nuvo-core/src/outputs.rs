@@ -34,6 +34,7 @@ use std::path::{Path, PathBuf};
 use nuvo_atlas::AtlasError;
 use nuvo_atlas::bake::{BakeOptions, BakeReport, ChartFields, RoundTrip, argmax, bake, chart_uv};
 use nuvo_atlas::camera::orbit_views;
+use nuvo_atlas::creases::{CreaseReport, crease_charts};
 use nuvo_atlas::export::{GlbOptions, glb_vertex_map, write_glb, write_obj};
 use nuvo_atlas::injective::{InjectiveOptions, InjectiveReport, make_injective, make_injective_where};
 use nuvo_atlas::islands::{IslandPacking, pack_islands};
@@ -159,6 +160,8 @@ pub struct LayoutSummary {
     pub injective: Option<InjectiveReport>,
     /// What joining small islands did (`output.join`, after `injective`).
     pub join: Option<JoinReport>,
+    /// What charting the surface by its creases did (`output.crease_charts`, after `join`).
+    pub creases: Option<CreaseReport>,
     /// What cutting islands at their necks did (`output.cut_necks`, before packing).
     pub necks: Option<NeckReport>,
     /// Islands packed, with `packing = "islands"`.
@@ -177,6 +180,7 @@ fn finish_layout(
         refine: None,
         injective: None,
         join: None,
+        creases: None,
         necks: None,
         islands: None,
     };
@@ -198,6 +202,13 @@ fn finish_layout(
         mesh = joined.mesh;
         summary.join = Some(joined.report);
         phases.done("join");
+    }
+    if opts.injective && opts.crease_charts {
+        let cones = InjectiveOptions { cut_cones: opts.cut_cones, ..injective_options(opts) };
+        let charted = crease_charts(&mesh, &cones)?;
+        mesh = charted.mesh;
+        summary.creases = Some(charted.report);
+        phases.done("creases");
     }
     if opts.packing == Packing::Islands && opts.cut_necks {
         let neck_options = NeckOptions::default();
