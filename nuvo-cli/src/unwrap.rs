@@ -40,8 +40,10 @@ pub struct UnwrapArgs {
     /// Number of charts, or `auto` to choose it from the shape.
     #[arg(long, default_value = "auto")]
     charts: String,
-    /// Seconds of training at most: the step count (400 on a machine fast enough) is cut to fit
-    /// it on this machine (then fixed in config.toml, so `nuvo train` reproduces the run).
+    /// Seconds of training at most: a clean surface plans 400 steps and stops sooner once its
+    /// charts hold still, or at 1.3× this budget on a slow machine; a fragmented input's 400
+    /// steps are cut to fit it on this machine (then fixed in config.toml, so `nuvo train`
+    /// reproduces the run).
     #[arg(long, default_value_t = DEFAULT_TIME_BUDGET)]
     time_budget: f64,
     /// Seed of every random choice.
@@ -214,8 +216,9 @@ pub fn run_unwrap(args: &UnwrapArgs) -> anyhow::Result<()> {
         return Ok(());
     }
 
-    // 4. The steps that fit the budget: timed on a trainer of the planned run, then the run's own
-    // trainer on the same source (the warm start's length follows the step count).
+    // 4. The steps that fit the budget (`fit_steps`: timed on a trainer of the planned run unless
+    // it stops once settled), then the run's own trainer on the same source (the warm start's
+    // length follows the step count).
     let losses = LossRegistry::with_builtins();
     let mut trainer = Trainer::with_source(&loaded, source, &losses)?;
     if user_set("training.steps") {

@@ -430,7 +430,8 @@ pub const MIN_STEPS: u64 = 300;
 /// its charts settled later. Common Shapes with the plan at 400 against the plans the budget
 /// gave on a Zen 1 (300–550 steps for several charts, 1150–2000 for one or two): mean
 /// Editability 0.9586 → 0.9579, mean wall 47.2 → 36.0 s a mesh, one-chart meshes unchanged
-/// in score at a third of the time (BENCHMARKS.md, "A plan of at most 400 steps").
+/// in score at a third of the time (BENCHMARKS.md, "A plan of at most 400 steps"). A run that
+/// stops once settled plans it untimed ([`fit_steps`]).
 pub const MAX_STEPS: u64 = 400;
 
 /// Times up to [`TIMED_STEPS`] steps of `trainer` (at step 0) one by one, puts it back as it
@@ -442,7 +443,24 @@ pub const MAX_STEPS: u64 = 400;
 /// the mean of eight moved the plan of one input between 350 and 500 steps from run to run
 /// (fastest step: within 14%). The caller builds the run's trainer with it, since the warm
 /// start's length follows the step count ([`recipe`]).
+///
+/// A run that stops once its charts settle (`training.stop_when_settled`, a clean surface) is not
+/// timed: it plans [`MAX_STEPS`] whatever the budget, which then stops it only through the run's
+/// time limit. Why: such a run trains 150–300 steps of its 400 on Common Shapes, at 0.56–0.67 of
+/// the fastest timed step on average (the early steps, before chart support prunes, are the
+/// dearest), so [`MEAN_STEP_COST`] priced it high, and a plan cut to 350 or 300 on a slower
+/// sitting changed its schedule, its settling and its atlas: the bunny trained 300 steps in
+/// 47.6 s planned at 350 against 200 in 27.3 s planned at 400 (BENCHMARKS.md, "Clean surfaces
+/// plan 400 steps untimed").
 pub fn fit_steps(trainer: &mut Trainer, budget_seconds: f64) -> Result<(u64, Decision), UnwrapError> {
+    if trainer.settling_threshold().is_some() {
+        let why = format!(
+            "at most: not timed, the same plan on every machine; training stops sooner once the {}, \
+             and a {budget_seconds:.0} s training budget stops it on a slower machine",
+            if trainer.config().model.charts == 1 { "chart's map holds still" } else { "charts hold still" }
+        );
+        return Ok((MAX_STEPS, Decision::new("steps", MAX_STEPS, why)));
+    }
     let start = trainer.checkpoint()?;
     // Timed at full batches: a warm start on a share of them costs less than the plan assumes.
     trainer.time_full_batches(true);
@@ -460,19 +478,11 @@ pub fn fit_steps(trainer: &mut Trainer, budget_seconds: f64) -> Result<(u64, Dec
     trainer.time_full_batches(false);
     trainer.restore(&start)?;
     let steps = steps_for(budget_seconds, per_step);
-    let settles = trainer.settling_threshold().is_some();
     let why = format!(
-        "{}{:.0} ms for the fastest of {timed} steps timed at the start (≈{:.0} ms on average over a \
-         run), {budget_seconds:.0} s of \
-         training budget, at most {MAX_STEPS} steps on any machine{}",
-        if settles { "at most: " } else { "" },
+        "{:.0} ms for the fastest of {timed} steps timed at the start (≈{:.0} ms on average over a \
+         run), {budget_seconds:.0} s of training budget, at most {MAX_STEPS} steps on any machine",
         1e3 * per_step,
         1e3 * per_step * MEAN_STEP_COST,
-        match (settles, trainer.config().model.charts) {
-            (false, _) => "",
-            (true, 1) => "; training stops sooner once the chart's map holds still",
-            (true, _) => "; training stops sooner once the charts hold still",
-        }
     );
     Ok((steps, Decision::new("steps", steps, why)))
 }
@@ -654,6 +664,21 @@ mod tests {
         assert_eq!(steps, MIN_STEPS);
         assert!(d.why.contains(&format!("fastest of {TIMED_STEPS} steps")), "{}", d.why);
         assert_eq!(trainer.step_index(), 0, "the trainer is put back as it was");
+    }
+
+    #[test]
+    fn a_run_that_stops_once_settled_plans_the_cap_untimed_at_any_budget() {
+        let source = uniform_source(slab([1.0, 0.5, 0.25]));
+        let text = "[geometry]\nsource = \"mesh\"\npath = \"box.obj\"\n\
+                    [model]\ncharts = 2\ndepth = 2\nwidth = 8\ngrid_resolution = 4\n\
+                    [training]\nsteps = 10\nbatch_3d = 64\nbatch_uv = 64\nstop_when_settled = 0.015\n";
+        let loaded = crate::config::from_str("box.toml", text).unwrap();
+        let losses = nuvo_losses::LossRegistry::with_builtins();
+        let mut trainer = Trainer::with_source(&loaded, Box::new(source), &losses).unwrap();
+        let (steps, d) = fit_steps(&mut trainer, 1e-9).unwrap();
+        assert_eq!(steps, MAX_STEPS, "a budget no step fits does not cut the plan");
+        assert!(d.why.contains("not timed") && d.why.contains("charts hold still"), "{}", d.why);
+        assert_eq!(trainer.step_index(), 0, "no step taken");
     }
 
     #[test]
