@@ -34,7 +34,8 @@
 //!   directions than the evaluation's; the crease charts replace the networks' layout only when
 //!   they score higher. Judged packed, not as they come from SLIM: unpacked, fandisk's crease
 //!   charts were estimated at 0.9641 against the networks' 0.9740 and scored 0.9848 against
-//!   0.9741 once packed (both measured 0.9855 and 0.9794).
+//!   0.9741 once packed (both measured 0.9855 and 0.9794). A trial that fails (an error of
+//!   SLIM, the packer or the renderer) keeps the networks' layout and says why in the report.
 //!
 //! Deterministic: the same mesh and options give the same bits.
 
@@ -80,6 +81,8 @@ pub struct CreaseReport {
     pub editability: Option<[f64; 2]>,
     /// The crease charts replaced the networks' layout.
     pub chosen: bool,
+    /// Why the trial failed, when it did (the networks' layout is then kept).
+    pub failed: Option<String>,
 }
 
 /// The layout to keep and what was done.
@@ -94,7 +97,7 @@ pub struct CreaseCharts {
 
 /// Charts `mesh` by its creases and keeps that layout where it beats the one `mesh` has
 /// (module docs); `injective` solves the crease charts as the caller solved its own islands.
-/// Errors: no UVs; making the charts injective, packing or rendering failed.
+/// Errors: no UVs (a failed trial is not an error: module docs).
 pub fn crease_charts(mesh: &TriMesh, injective: &InjectiveOptions) -> Result<CreaseCharts, AtlasError> {
     require_uv(mesh)?;
     let mut report = CreaseReport::default();
@@ -103,18 +106,35 @@ pub fn crease_charts(mesh: &TriMesh, injective: &InjectiveOptions) -> Result<Cre
     };
     report.regions = regions;
     report.crease_length = crease_length;
-    let solved = make_injective(&projected(mesh, &region, regions), injective)?;
+    // A trial that fails leaves the networks' layout as it is: it is an option, not the atlas.
+    match trial(mesh, &region, regions, injective, &mut report) {
+        Ok(Some(charts)) => return Ok(CreaseCharts { mesh: charts, report }),
+        Ok(None) => {}
+        Err(e) => report.failed = Some(e.to_string()),
+    }
+    Ok(CreaseCharts { mesh: mesh.clone(), report })
+}
+
+/// Solves the crease charts of `region` and judges them against `mesh`'s layout (module docs):
+/// the charts when they score higher. Records what it did in `report`.
+fn trial(
+    mesh: &TriMesh,
+    region: &[u32],
+    regions: usize,
+    injective: &InjectiveOptions,
+    report: &mut CreaseReport,
+) -> Result<Option<TriMesh>, AtlasError> {
+    let solved = make_injective(&projected(mesh, region, regions), injective)?;
     report.injective = Some(solved.report);
     let judge = NeckOptions::default().packing;
     let packed = [pack_islands(mesh, &judge)?.mesh, pack_islands(&solved.mesh, &judge)?.mesh];
-    let Some(bounds) = mesh.bounds() else { return Ok(CreaseCharts { mesh: mesh.clone(), report }) };
+    let Some(bounds) = mesh.bounds() else { return Ok(None) };
     let views = EvalOptions { seed: JUDGE_SEED, ..Default::default() };
     let cameras = orbit_views(&bounds, views.views, views.seed, views.resolution, views.resolution);
     let e = unpacked_editability(mesh, &[&packed[0], &packed[1]], &cameras, &views.image)?;
     report.editability = Some([e[0], e[1]]);
     report.chosen = e[1] > e[0];
-    let mesh = if report.chosen { solved.mesh } else { mesh.clone() };
-    Ok(CreaseCharts { mesh, report })
+    Ok(report.chosen.then_some(solved.mesh))
 }
 
 /// The region of each face, the number of regions and the 3-D length of the creases between

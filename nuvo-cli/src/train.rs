@@ -243,6 +243,14 @@ fn print_report(report: &OutputReport, seconds: f64) {
                 inj.cones, inj.coned_islands
             );
         }
+        if let Some((c, [a, b])) = m.layout.creases.as_ref().and_then(|c| Some((c, c.editability?))) {
+            println!(
+                "       crease charts ({} regions between creases of the surface): {}, Editability estimated \
+                 {a:.4} for the networks' charts and {b:.4} for them",
+                c.regions,
+                if c.chosen { "chosen" } else { "not chosen" }
+            );
+        }
         if let Some(n) = m.layout.necks.as_ref().filter(|n| !n.skipped) {
             println!(
                 "       islands cut at their necks: {} (packing efficiency at 512²: {:.3} -> {:.3}; {} trials){}",

@@ -309,7 +309,7 @@ pub struct OutputConfig {
     /// result stays injective. Runs after `injective`; off by default, on in `nuvo unwrap`
     /// wherever `injective` is.
     pub join: bool,
-    /// With `injective`: chart the surface by its sharp creases (normals more than 60° apart;
+    /// With `injective` and `packing = "islands"`: chart the surface by its sharp creases (normals more than 60° apart;
     /// regions under 2% of the area join a neighbour), make those charts injective as the
     /// networks' islands were, and keep them instead of the networks' layout where the
     /// Editability estimated from renders other than the evaluation's is higher, both packed

@@ -203,7 +203,8 @@ fn finish_layout(
         summary.join = Some(joined.report);
         phases.done("join");
     }
-    if opts.injective && opts.crease_charts {
+    // Crease charts come unpacked, wherever SLIM left them: only the island packer lays them out.
+    if opts.injective && opts.crease_charts && opts.packing == Packing::Islands {
         let cones = InjectiveOptions { cut_cones: opts.cut_cones, ..injective_options(opts) };
         let charted = crease_charts(&mesh, &cones)?;
         mesh = charted.mesh;
