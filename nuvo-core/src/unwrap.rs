@@ -272,8 +272,9 @@ pub fn recipe(r: &RecipeInput) -> String {
     bake += "cut_cones = true\n";
     // A surface of patches meeting at sharp creases (a machined part) is charted by its creases
     // where the renders say that beats the networks' charts: fandisk 0.9794 -> 0.9855 (xatlas
-    // 0.9806); the other Common Shapes keep their atlases, judged (cheburashka, suzanne, the
-    // beetle, the teapot) or left alone (one region; BENCHMARKS.md, "Charts along the creases").
+    // 0.9806), the teapot's separate patches 0.9582 -> 0.9689; cheburashka, suzanne and the
+    // beetle were judged and keep the networks' charts, the other nine have one region
+    // (BENCHMARKS.md, "Charts along the creases").
     bake += "crease_charts = true\n";
     if !clean {
         bake += &format!("injective_split_energy = {:?}\n", nuvo_atlas::injective::FAILED_SLIM_ENERGY);
@@ -449,9 +450,9 @@ pub const MAX_STEPS: u64 = 400;
 /// time limit. Why: such a run trains 150–300 steps of its 400 on Common Shapes, at 0.56–0.67 of
 /// the fastest timed step on average (the early steps, before chart support prunes, are the
 /// dearest), so [`MEAN_STEP_COST`] priced it high, and a plan cut to 350 or 300 on a slower
-/// sitting changed its schedule, its settling and its atlas: the bunny trained 300 steps in
-/// 47.6 s planned at 350 against 200 in 27.3 s planned at 400 (BENCHMARKS.md, "Clean surfaces
-/// plan 400 steps untimed").
+/// sitting changed its schedule, its settling and its atlas: the bunny trained 300 steps planned
+/// at 350 and 200 planned at 300 or 400, with three different atlases (BENCHMARKS.md, "Clean
+/// surfaces plan 400 steps untimed").
 pub fn fit_steps(trainer: &mut Trainer, budget_seconds: f64) -> Result<(u64, Decision), UnwrapError> {
     if trainer.settling_threshold().is_some() {
         let why = format!(
