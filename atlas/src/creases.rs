@@ -30,9 +30,9 @@
 //!   [`make_injective`] with the caller's options (folded projections are embedded anew, cone
 //!   points cut open as for the networks' islands).
 //! - **Judgement**: both layouts are packed as [`NeckOptions`]'s trials are (512², gutter 1,
-//!   turns) and scored by [`unpacked_editability`] over the views of [`JUDGE_SEED`], other
-//!   directions than the evaluation's; the crease charts replace the networks' layout only when
-//!   they score higher. Judged packed, not as they come from SLIM: unpacked, fandisk's crease
+//!   turns) and scored by [`crate::metrics::unpacked_editability`] over the views of
+//!   [`crate::necks::JUDGE_SEED`], other directions than the evaluation's; the crease charts
+//!   replace the networks' layout only when they score higher. Judged packed, not as they come from SLIM: unpacked, fandisk's crease
 //!   charts were estimated at 0.9641 against the networks' 0.9740 and scored 0.9848 against
 //!   0.9741 once packed (both measured 0.9855 and 0.9794). A trial that fails (an error of
 //!   SLIM, the packer or the renderer) keeps the networks' layout and says why in the report.
@@ -45,13 +45,11 @@ use glam::DVec3;
 use nuvo_geometry::{TriMesh, UvLayer};
 use serde::Serialize;
 
-use crate::camera::orbit_views;
 use crate::error::AtlasError;
 use crate::geom::to_dvec3;
 use crate::injective::{InjectiveOptions, InjectiveReport, make_injective};
 use crate::islands::pack_islands;
-use crate::metrics::{EvalOptions, unpacked_editability};
-use crate::necks::{JUDGE_SEED, NeckOptions};
+use crate::necks::{NeckOptions, judged_editability};
 use crate::uvstats::{Dsu, faces_by_edge, require_uv};
 
 /// Angle between two faces' normals above which their shared edge is a crease. Blender's Smart
@@ -128,10 +126,7 @@ fn trial(
     report.injective = Some(solved.report);
     let judge = NeckOptions::default().packing;
     let packed = [pack_islands(mesh, &judge)?.mesh, pack_islands(&solved.mesh, &judge)?.mesh];
-    let Some(bounds) = mesh.bounds() else { return Ok(None) };
-    let views = EvalOptions { seed: JUDGE_SEED, ..Default::default() };
-    let cameras = orbit_views(&bounds, views.views, views.seed, views.resolution, views.resolution);
-    let e = unpacked_editability(mesh, &[&packed[0], &packed[1]], &cameras, &views.image)?;
+    let Some(e) = judged_editability(mesh, &[&packed[0], &packed[1]])? else { return Ok(None) };
     report.editability = Some([e[0], e[1]]);
     report.chosen = e[1] > e[0];
     Ok(report.chosen.then_some(solved.mesh))

@@ -284,15 +284,26 @@ pub fn judge_cuts(
     if report.cuts == 0 || report.efficiency_before <= 0.0 {
         return Ok(true);
     }
-    let Some(bounds) = before.bounds() else { return Ok(true) };
-    let views = EvalOptions { seed: JUDGE_SEED, ..Default::default() };
-    let cameras = orbit_views(&bounds, views.views, views.seed, views.resolution, views.resolution);
-    let e = unpacked_editability(before, &[before, after], &cameras, &views.image)?;
+    let Some(e) = judged_editability(before, &[before, after])? else { return Ok(true) };
     let rise = (report.efficiency_after / report.efficiency_before).max(1.0);
     let keep = e[1] >= e[0] - opts.editability_per_packing * rise.ln();
     report.editability = Some([e[0], e[1]]);
     report.undone = !keep;
     Ok(keep)
+}
+
+/// [`unpacked_editability`] of each of `layouts` (UV layers of `mesh`) over the views the
+/// layout passes judge by: the evaluation's count and size from [`JUDGE_SEED`]. `None` when
+/// `mesh` has no bounds (nothing to render). Shared by [`judge_cuts`] and
+/// [`crate::creases`]. Errors as [`unpacked_editability`]'s.
+pub(crate) fn judged_editability(
+    mesh: &TriMesh,
+    layouts: &[&TriMesh],
+) -> Result<Option<Vec<f64>>, AtlasError> {
+    let Some(bounds) = mesh.bounds() else { return Ok(None) };
+    let views = EvalOptions { seed: JUDGE_SEED, ..Default::default() };
+    let cameras = orbit_views(&bounds, views.views, views.seed, views.resolution, views.resolution);
+    unpacked_editability(mesh, layouts, &cameras, &views.image).map(Some)
 }
 
 /// The island's minimum-area bounding rectangle's area minus its UV area, in units of 3-D area

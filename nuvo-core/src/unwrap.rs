@@ -647,15 +647,23 @@ mod tests {
         assert_eq!(choose_charts(&t).0, 2);
     }
 
+    /// A tiny trainer on a box sampled by area, with `model` and `training` lines added to its
+    /// config: what the step-planning tests time.
+    fn box_trainer(model: &str, training: &str) -> Trainer {
+        let source = uniform_source(slab([1.0, 0.5, 0.25]));
+        let text = format!(
+            "[geometry]\nsource = \"mesh\"\npath = \"box.obj\"\n\
+             [model]\n{model}depth = 2\nwidth = 8\ngrid_resolution = 4\n\
+             [training]\n{training}steps = 10\nbatch_3d = 64\nbatch_uv = 64\n"
+        );
+        let loaded = crate::config::from_str("box.toml", &text).unwrap();
+        let losses = nuvo_losses::LossRegistry::with_builtins();
+        Trainer::with_source(&loaded, Box::new(source), &losses).unwrap()
+    }
+
     #[test]
     fn timing_stops_once_one_step_fits_the_cap() {
-        let source = uniform_source(slab([1.0, 0.5, 0.25]));
-        let text = "[geometry]\nsource = \"mesh\"\npath = \"box.obj\"\n\
-                    [model]\ndepth = 2\nwidth = 8\ngrid_resolution = 4\n\
-                    [training]\nsteps = 10\nbatch_3d = 64\nbatch_uv = 64\n";
-        let loaded = crate::config::from_str("box.toml", text).unwrap();
-        let losses = nuvo_losses::LossRegistry::with_builtins();
-        let mut trainer = Trainer::with_source(&loaded, Box::new(source), &losses).unwrap();
+        let mut trainer = box_trainer("", "");
         // A budget that any step fits 400 times over: the first timed step decides.
         let (steps, d) = fit_steps(&mut trainer, 1e9).unwrap();
         assert_eq!(steps, MAX_STEPS);
@@ -669,13 +677,7 @@ mod tests {
 
     #[test]
     fn a_run_that_stops_once_settled_plans_the_cap_untimed_at_any_budget() {
-        let source = uniform_source(slab([1.0, 0.5, 0.25]));
-        let text = "[geometry]\nsource = \"mesh\"\npath = \"box.obj\"\n\
-                    [model]\ncharts = 2\ndepth = 2\nwidth = 8\ngrid_resolution = 4\n\
-                    [training]\nsteps = 10\nbatch_3d = 64\nbatch_uv = 64\nstop_when_settled = 0.015\n";
-        let loaded = crate::config::from_str("box.toml", text).unwrap();
-        let losses = nuvo_losses::LossRegistry::with_builtins();
-        let mut trainer = Trainer::with_source(&loaded, Box::new(source), &losses).unwrap();
+        let mut trainer = box_trainer("charts = 2\n", "stop_when_settled = 0.015\n");
         let (steps, d) = fit_steps(&mut trainer, 1e-9).unwrap();
         assert_eq!(steps, MAX_STEPS, "a budget no step fits does not cut the plan");
         assert!(d.why.contains("not timed") && d.why.contains("charts hold still"), "{}", d.why);
