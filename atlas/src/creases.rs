@@ -212,8 +212,11 @@ pub fn crease_regions(mesh: &TriMesh) -> Option<(Vec<u32>, usize, f64)> {
             *label.entry(dsu.find(f)).or_insert(next)
         })
         .collect();
-    let length =
-        creases.iter().filter(|&&(x, y, _)| region[x as usize] != region[y as usize]).map(|c| c.2).sum();
+    // A fold from +0 (`sum` of f64 starts at −0, which `metrics.json` printed for separate parts).
+    let length = creases
+        .iter()
+        .filter(|&&(x, y, _)| region[x as usize] != region[y as usize])
+        .fold(0.0, |sum, c| sum + c.2);
     Some((region, label.len(), length))
 }
 
