@@ -37,11 +37,15 @@
 //!    instead of being embedded anew and split (the whole island is turned the same way in
 //!    step 1). A **ragged** detachment is not made: when it would give more than two parts and
 //!    their seams (the summed rest length of the edges between two parts) exceed [`RAGGED_CUT`]
-//!    times the cut between the island's two halves (below), the island is halved instead: where
-//!    one chart maps both sides of a thin wall, the flips of the far side interleave with the
-//!    near side's faces, and detaching them cut the unruly teapot's charts into hundreds of
-//!    parts whose seams covered its body. An island with no current map to detach from, whose
-//!    faces are all bad, or whose detachment is ragged is cut
+//!    times the cut between the island's two halves (below): where one chart maps both sides
+//!    of a thin wall, the flips of the far side interleave with the near side's faces, and
+//!    detaching them cut the unruly teapot's charts into hundreds of parts whose seams covered
+//!    its body. The island is then split between the wall's **sides** instead: each face
+//!    labelled by its orientation in the map, smoothed by a minimum cut that charges the edges
+//!    between the sides by their length where the surface does not turn back
+//!    ([`SIDE_SMOOTHING`]), and each connected part solved again from the map (the mirrored side
+//!    mirrored back). An island with no current map to detach from, whose faces are all bad, or
+//!    whose sides are one part or ragged too is cut
 //!    into its pieces of consistent winding and manifold edges or, when it is one, into two
 //!    halves grown breadth-first from two far-apart faces. A part of one face is always a disc, so the recursion ends. Without `split` an island
 //!    that is neither injective, repairable nor a disc keeps its UVs (counted as not injective).
@@ -118,8 +122,10 @@
 //! - **Orientation and place**: every island comes out counter-clockwise (a mirrored island of the
 //!   input is mirrored back to a true image of its surface, so no output face is flipped against
 //!   any majority), scaled to the island's input texel density (`sqrt(uv area / 3-D area)`;
-//!   parts keep their island's), centred on the input island's UV centroid. Parts of one island
-//!   lie on top of each other: a packing step ([`crate::islands`]) must follow, as `split` says.
+//!   parts keep their island's), centred on the input island's UV centroid, or with `split` on
+//!   the origin (`Placement`: f32 then keeps an island's shape to a rounding of its own extent).
+//!   Parts of one island, and with `split` all islands, lie on top of each other: a packing step
+//!   ([`crate::islands`]) must follow, as `split` says.
 //!
 //! Islands are processed in parallel (rayon), each sequentially; the result does not depend on the
 //! thread count.
@@ -221,6 +227,14 @@ pub const FAILED_SLIM_ENERGY: f64 = 100.0;
 /// (BENCHMARKS.md, "Thin walls").
 pub const RAGGED_CUT: f64 = 8.0;
 
+/// Smoothness of the labelling of a thin wall's sides ([`Patch::sides`]): an edge between the
+/// sides costs this many mean edge lengths times its own rest length, times how little the
+/// surface bends across it (`(1 + cos θ) / 2` of the angle between the faces' normals: the rim
+/// where the wall turns back costs little), against each face's rest area for a label other
+/// than its orientation's. On a flat surface a spot of mirrored faces is cut out as a side of
+/// its own when its radius exceeds about `2 ·` this many mean edges, and relabelled otherwise.
+pub const SIDE_SMOOTHING: f64 = 4.0;
+
 /// Radius of the neighbourhood whose angle deficits make a cone point, as a share of the square
 /// root of the patch's 3-D area (module docs, step 6). 0.08 gave the same mean Editability on
 /// four Common Shapes meshes (0.9483 against 0.9478) with the cow's worst chart at 1.20
@@ -317,6 +331,9 @@ pub struct InjectiveReport {
     pub reembedded: usize,
     /// Input islands split into parts.
     pub split: usize,
+    /// Input islands split between the two sides of a thin wall ([`SIDE_SMOOTHING`], module
+    /// docs step 4): some of their parts come from that minimum cut.
+    pub sided: usize,
     /// Input islands that are not topological discs.
     pub not_disc: usize,
     /// Symmetric Dirichlet energy per unit 3-D area over all faces with a 3-D area, before and
@@ -378,6 +395,7 @@ pub fn make_injective_where(
         report.not_injective_before += usize::from(!r.injective_before);
         report.not_disc += usize::from(!r.disc);
         report.split += usize::from(r.parts.len() > 1);
+        report.sided += usize::from(r.parts.iter().any(|p| p.sided));
         if let Some((e, a)) = r.energy_before {
             (e_before, a_before) = (e_before + e, a_before + a);
         }
@@ -432,6 +450,7 @@ impl IslandResult {
             rounds: 0,
             cones: 0,
             energy: (0.0, 0.0),
+            sided: false,
         };
         IslandResult { injective_before: true, disc: true, energy_before: None, parts: vec![part] }
     }
@@ -459,6 +478,8 @@ struct PartResult {
     cones: usize,
     /// `(Σ energy, Σ 3-D area)` of the output map over faces with a 3-D area.
     energy: (f64, f64),
+    /// Whether the part comes from a split between a thin wall's sides (`Ctx::split_sides`).
+    sided: bool,
 }
 
 impl Ctx<'_> {
@@ -501,6 +522,7 @@ impl Ctx<'_> {
                 rounds: 0,
                 cones: 0,
                 energy,
+                sided: false,
             });
             return;
         }
@@ -542,6 +564,7 @@ impl Ctx<'_> {
                 rounds: 0,
                 cones: 0,
                 energy,
+                sided: false,
             });
             return;
         }
@@ -589,7 +612,16 @@ impl Ctx<'_> {
         let injective = patch.is_injective(&p);
         let energy = (patch.energy(&p).unwrap_or(f64::INFINITY), patch.area3);
         let corners = placement.place(&patch, &p);
-        out.push(PartResult { faces: patch.faces, corners, start, injective, rounds, cones, energy });
+        out.push(PartResult {
+            faces: patch.faces,
+            corners,
+            start,
+            injective,
+            rounds,
+            cones,
+            energy,
+            sided: false,
+        });
     }
 }
 
@@ -626,13 +658,37 @@ impl Ctx<'_> {
         // mirrored, its flips interleaved with the near side's), detaching them cuts the island
         // into many small parts whose seams the renders see everywhere; two halves cost one cut.
         if patch.is_ragged(&parts) {
-            return false;
+            return self.split_sides(patch, p, placement, out);
         }
         for part in parts {
             let sub = Patch::new(self, &part);
             let current = sub.inherit(patch, &q);
             self.solve(sub, Some(current), placement, out);
         }
+        true
+    }
+
+    /// Splits `patch` between the sides of the thin wall that its map `p` holds both of
+    /// ([`Patch::sides`]), each part solved again from `p` (a mirrored side mirrored back);
+    /// returns false (and does nothing) when the labelling gives one part or a ragged split.
+    fn split_sides(
+        &self,
+        patch: &Patch,
+        p: &[[f64; 2]],
+        placement: &Placement,
+        out: &mut Vec<PartResult>,
+    ) -> bool {
+        let parts = patch.components(&patch.sides(self, p));
+        if parts.len() < 2 || patch.is_ragged(&parts) {
+            return false;
+        }
+        let first = out.len();
+        for part in parts {
+            let sub = Patch::new(self, &part);
+            let current = sub.inherit(patch, p);
+            self.solve(sub, Some(current), placement, out);
+        }
+        out[first..].iter_mut().for_each(|r| r.sided = true);
         true
     }
 }
@@ -1844,6 +1900,48 @@ impl Patch {
             grid.insert(*q);
         }
         bad
+    }
+
+    /// Each face's side of a thin wall (true: the side the map `p` mirrors), where one chart's
+    /// map holds both sides of a wall thinner than the networks can tell apart: the far side
+    /// comes mirrored, but its flips interleave with the near side's faces along the noise of a
+    /// marching-cubes surface, so the faces' own orientations cut the patch into hundreds of
+    /// parts (module docs, step 4). The labelling of least energy (each face's rest area for a
+    /// label against its orientation, plus [`SIDE_SMOOTHING`] for the edges between the sides)
+    /// is a minimum cut ([`crate::mincut`]): spots of flips join their side, and the sides part
+    /// where the wall turns back. Collapsed faces cost nothing either way.
+    fn sides(&self, ctx: &Ctx, p: &[[f64; 2]]) -> Vec<bool> {
+        let mut unary = vec![(0.0, 0.0); self.faces.len()];
+        for (t, c) in self.live() {
+            let w = self.rest[t].weight;
+            unary[t] = if area2(c.map(|i| p[i as usize])) > 0.0 { (0.0, w) } else { (w, 0.0) };
+        }
+        let normal = |t: u32| {
+            let [a, b, c] = ctx.mesh.corners(self.faces[t as usize] as usize).map(to_dvec3);
+            (b - a).cross(c - a).normalize_or_zero()
+        };
+        let by_edge = faces_by_edge(self.live().map(|(t, c)| (t as u32, c)));
+        let mut pairs = Vec::with_capacity(by_edge.len());
+        let mut lengths = 0.0;
+        for (t, c) in self.live() {
+            for k in 0..3 {
+                let (a, b) = (c[k], c[(k + 1) % 3]);
+                if let [f, g] = by_edge[&(a.min(b), a.max(b))][..]
+                    && f == t as u32
+                {
+                    let x = &self.rest[t].x;
+                    let length = (x[(k + 1) % 3][0] - x[k][0]).hypot(x[(k + 1) % 3][1] - x[k][1]);
+                    let bend = 0.5 * (1.0 + normal(f).dot(normal(g)));
+                    pairs.push((f, g, length * bend));
+                    lengths += length;
+                }
+            }
+        }
+        let mean_edge = if pairs.is_empty() { 0.0 } else { lengths / pairs.len() as f64 };
+        for pair in &mut pairs {
+            pair.2 *= SIDE_SMOOTHING * mean_edge;
+        }
+        crate::mincut::two_labels(&unary, &pairs)
     }
 
     /// The connected parts (faces joined across a shared edge, both with the same `label`) of
@@ -3398,6 +3496,37 @@ mod tests {
         }
         let coords = positions.iter().map(|p| [p[0], p[1]]).collect();
         TriMesh { positions, uv: Some(UvLayer { coords, triangles: triangles.clone() }), triangles }
+    }
+
+    /// The projected sphere's near side speckled with flips (a few vertices of the upper
+    /// hemisphere pushed across their neighbours, as the noise of a marching-cubes wall does):
+    /// the faces' own orientations make more parts than the two sides; the sides' labelling
+    /// gives exactly the two hemispheres, parted at the equator.
+    #[test]
+    fn the_sides_of_a_speckled_projection_part_at_its_rim() {
+        let mut m = projected_sphere(24, 48);
+        let upper_ring = |r: u32, k: u32| (1 + (r - 1) * 48 + k) as usize;
+        let coords = &mut m.uv.as_mut().unwrap().coords;
+        for (r, k) in [(6, 0), (6, 12), (6, 24), (9, 36), (4, 30)] {
+            coords[upper_ring(r, k)][0] += 0.3;
+        }
+        whole_patch(&m, |patch, ctx| {
+            let p = patch.current(ctx).unwrap();
+            let own: Vec<bool> = (0..patch.faces.len())
+                .map(|t| patch.collapsed[t] || area2(patch.corners[t].map(|i| p[i as usize])) <= 0.0)
+                .collect();
+            assert!(patch.components(&own).len() > 2, "the speckles flip faces");
+            let sides = patch.sides(ctx, &p);
+            assert_eq!(patch.components(&sides).len(), 2);
+            let lower = |t: usize| {
+                let f = patch.faces[t] as usize;
+                m.triangles[f].iter().map(|&v| m.positions[v as usize][2]).sum::<f32>() < 0.0
+            };
+            let mirrored_side_is_lower = sides[0] == lower(0);
+            for (t, &side) in sides.iter().enumerate() {
+                assert_eq!(side == lower(t), mirrored_side_is_lower, "face {t}");
+            }
+        });
     }
 
     #[test]

@@ -42,6 +42,7 @@ pub mod islands;
 pub mod join;
 pub mod load;
 pub mod metrics;
+mod mincut;
 pub mod necks;
 pub mod pack;
 pub mod partuv;

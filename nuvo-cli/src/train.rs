@@ -243,6 +243,12 @@ fn print_report(report: &OutputReport, seconds: f64) {
                 inj.cones, inj.coned_islands
             );
         }
+        if let Some(inj) = m.layout.injective.as_ref().filter(|r| r.sided > 0) {
+            println!(
+                "       islands holding both sides of a thin wall, split between the sides: {}",
+                inj.sided
+            );
+        }
         if let Some((c, [a, b])) = m.layout.creases.as_ref().and_then(|c| Some((c, c.editability?))) {
             println!(
                 "       crease charts ({} regions between creases of the surface): {}, Editability estimated \
