@@ -45,7 +45,7 @@
 //!    between the sides by their length where the surface does not turn back
 //!    ([`SIDE_SMOOTHING`]), and each connected part solved again from the map (the mirrored side
 //!    mirrored back). An island with no current map to detach from, whose faces are all bad, or
-//!    whose sides are one part or ragged too is cut
+//!    whose labelling finds one side only or a ragged split too is cut
 //!    into its pieces of consistent winding and manifold edges or, when it is one, into two
 //!    halves grown breadth-first from two far-apart faces. A part of one face is always a disc, so the recursion ends. Without `split` an island
 //!    that is neither injective, repairable nor a disc keeps its UVs (counted as not injective).
@@ -670,7 +670,8 @@ impl Ctx<'_> {
 
     /// Splits `patch` between the sides of the thin wall that its map `p` holds both of
     /// ([`Patch::sides`]), each part solved again from `p` (a mirrored side mirrored back);
-    /// returns false (and does nothing) when the labelling gives one part or a ragged split.
+    /// returns false (and does nothing) when the labelling finds one side only or a ragged
+    /// split.
     fn split_sides(
         &self,
         patch: &Patch,
@@ -678,8 +679,14 @@ impl Ctx<'_> {
         placement: &Placement,
         out: &mut Vec<PartResult>,
     ) -> bool {
-        let parts = patch.components(&patch.sides(self, p));
-        if parts.len() < 2 || patch.is_ragged(&parts) {
+        let sides = patch.sides(self, p);
+        // One side only: the flips were spots of noise, and a patch of several pieces (joined
+        // through vertices alone) is left to the pieces of consistent winding.
+        if !(sides.contains(&true) && sides.contains(&false)) {
+            return false;
+        }
+        let parts = patch.components(&sides);
+        if patch.is_ragged(&parts) {
             return false;
         }
         let first = out.len();
