@@ -575,11 +575,7 @@ impl Ctx<'_> {
         }
         let parts = patch.consistent_parts();
         let parts = if parts.len() > 1 { parts } else { patch.halves().to_vec() };
-        for part in parts {
-            let sub = Patch::new(self, &part);
-            let current = current.as_ref().map(|p| sub.inherit(&patch, p));
-            self.solve(sub, current, placement, out);
-        }
+        self.solve_parts(&patch, parts, current.as_deref(), placement, out);
     }
 
     /// SLIM from the injective `p`, then [`Ctx::push`].
@@ -637,8 +633,10 @@ impl Ctx<'_> {
     /// Detaches the faces that make `patch`'s map at `p` not injective: faces of non-positive
     /// area and positive faces overlapping another positive face (module docs). The rest keeps
     /// its map; the good and the bad faces each form parts of connected faces, solved anew.
-    /// Returns false (and does nothing) when no face or every face is bad, or when the
-    /// detachment would be ragged (module docs, step 4: [`RAGGED_CUT`]).
+    /// A ragged detachment (module docs, step 4: [`RAGGED_CUT`]) is not made: the patch is split
+    /// between a thin wall's sides instead ([`Ctx::split_sides`]). Returns false (and does
+    /// nothing) when no face or every face is bad, or when the detachment is ragged and the
+    /// sides' split is not made either.
     fn detach(
         &self,
         patch: &Patch,
@@ -656,15 +654,12 @@ impl Ctx<'_> {
         let parts = patch.components(&bad);
         // Where the map's bad faces are ragged (a thin wall whose far side one chart maps
         // mirrored, its flips interleaved with the near side's), detaching them cuts the island
-        // into many small parts whose seams the renders see everywhere; two halves cost one cut.
+        // into many small parts whose seams the renders see everywhere; parting the wall's two
+        // sides (or, failing that, two halves: the caller) costs one cut.
         if patch.is_ragged(&parts) {
             return self.split_sides(patch, p, placement, out);
         }
-        for part in parts {
-            let sub = Patch::new(self, &part);
-            let current = sub.inherit(patch, &q);
-            self.solve(sub, Some(current), placement, out);
-        }
+        self.solve_parts(patch, parts, Some(&q), placement, out);
         true
     }
 
@@ -690,13 +685,26 @@ impl Ctx<'_> {
             return false;
         }
         let first = out.len();
-        for part in parts {
-            let sub = Patch::new(self, &part);
-            let current = sub.inherit(patch, p);
-            self.solve(sub, Some(current), placement, out);
-        }
+        self.solve_parts(patch, parts, Some(p), placement, out);
         out[first..].iter_mut().for_each(|r| r.sided = true);
         true
+    }
+
+    /// Solves each of `parts` (faces of `patch`, covering it) again, from its share of `patch`'s
+    /// map `p` when there is one.
+    fn solve_parts(
+        &self,
+        patch: &Patch,
+        parts: Vec<Vec<u32>>,
+        p: Option<&[[f64; 2]]>,
+        placement: &Placement,
+        out: &mut Vec<PartResult>,
+    ) {
+        for part in parts {
+            let sub = Patch::new(self, &part);
+            let current = p.map(|p| sub.inherit(patch, p));
+            self.solve(sub, current, placement, out);
+        }
     }
 }
 
