@@ -1931,10 +1931,16 @@ impl Patch {
             let w = self.rest[t].weight;
             unary[t] = if area2(c.map(|i| p[i as usize])) > 0.0 { (0.0, w) } else { (w, 0.0) };
         }
-        let normal = |t: u32| {
-            let [a, b, c] = ctx.mesh.corners(self.faces[t as usize] as usize).map(to_dvec3);
-            (b - a).cross(c - a).normalize_or_zero()
-        };
+        // Each face's unit normal once (a face meets up to three edges).
+        let normals: Vec<glam::DVec3> = self
+            .faces
+            .iter()
+            .map(|&f| {
+                let [a, b, c] = ctx.mesh.corners(f as usize).map(to_dvec3);
+                (b - a).cross(c - a).normalize_or_zero()
+            })
+            .collect();
+        let normal = |t: u32| normals[t as usize];
         let by_edge = faces_by_edge(self.live().map(|(t, c)| (t as u32, c)));
         let mut pairs = Vec::with_capacity(by_edge.len());
         let mut lengths = 0.0;
