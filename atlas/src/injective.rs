@@ -46,8 +46,13 @@
 //!    ([`SIDE_SMOOTHING`]), and each connected part solved again from the map (the mirrored side
 //!    mirrored back). An island with no current map to detach from, whose faces are all bad, or
 //!    whose labelling finds one side only or a ragged split too is cut
-//!    into its pieces of consistent winding and manifold edges or, when it is one, into two
-//!    halves grown breadth-first from two far-apart faces. A part of one face is always a disc, so the recursion ends. Without `split` an island
+//!    into its pieces of consistent winding and manifold edges or, when it is one, **in two**
+//!    (`Patch::cut_in_two`): the faces within a third of the way (in steps across edges) from
+//!    either of two far-apart faces go with that face, and the band between is parted where
+//!    the cut is shortest (rest edge lengths, discounted across a bend as for the sides), found
+//!    exactly by a minimum cut; the *halves* grown breadth-first from the two faces, whose
+//!    seam runs where the two fronts meet, are the fallback and the yardstick of
+//!    [`RAGGED_CUT`]. A part of one face is always a disc, so the recursion ends. Without `split` an island
 //!    that is neither injective, repairable nor a disc keeps its UVs (counted as not injective).
 //! 5. **SLIM** lowers the distortion without losing injectivity (Rabinovich, Poranne, Panozzo,
 //!    Sorkine-Hornung, "Scalable Locally Injective Mappings", 2017) on the symmetric Dirichlet
@@ -574,7 +579,7 @@ impl Ctx<'_> {
             return;
         }
         let parts = patch.consistent_parts();
-        let parts = if parts.len() > 1 { parts } else { patch.halves().to_vec() };
+        let parts = if parts.len() > 1 { parts } else { patch.cut_in_two(self) };
         self.solve_parts(&patch, parts, current.as_deref(), placement, out);
     }
 
@@ -981,7 +986,7 @@ impl Patch {
     }
 
     /// The live faces: `(index, corners)` of the faces that are not collapsed.
-    fn live(&self) -> impl Iterator<Item = (usize, [u32; 3])> + '_ {
+    fn live(&self) -> impl Iterator<Item = (usize, [u32; 3])> + Clone + '_ {
         self.corners.iter().enumerate().filter(|(t, _)| !self.collapsed[*t]).map(|(t, &c)| (t, c))
     }
 
@@ -1931,33 +1936,10 @@ impl Patch {
             let w = self.rest[t].weight;
             unary[t] = if area2(c.map(|i| p[i as usize])) > 0.0 { (0.0, w) } else { (w, 0.0) };
         }
-        // Each face's unit normal once (a face meets up to three edges).
-        let normals: Vec<glam::DVec3> = self
-            .faces
-            .iter()
-            .map(|&f| {
-                let [a, b, c] = ctx.mesh.corners(f as usize).map(to_dvec3);
-                (b - a).cross(c - a).normalize_or_zero()
-            })
-            .collect();
-        let normal = |t: u32| normals[t as usize];
-        let by_edge = faces_by_edge(self.live().map(|(t, c)| (t as u32, c)));
-        let mut pairs = Vec::with_capacity(by_edge.len());
-        let mut lengths = 0.0;
-        for (t, c) in self.live() {
-            for k in 0..3 {
-                let (a, b) = (c[k], c[(k + 1) % 3]);
-                if let [f, g] = by_edge[&(a.min(b), a.max(b))][..]
-                    && f == t as u32
-                {
-                    let x = &self.rest[t].x;
-                    let length = (x[(k + 1) % 3][0] - x[k][0]).hypot(x[(k + 1) % 3][1] - x[k][1]);
-                    let bend = 0.5 * (1.0 + normal(f).dot(normal(g)));
-                    pairs.push((f, g, length * bend));
-                    lengths += length;
-                }
-            }
-        }
+        let edges = self.edges_between(ctx, self.live());
+        let lengths: f64 = edges.iter().map(|e| e.2).sum();
+        let mut pairs: Vec<(u32, u32, f64)> =
+            edges.iter().map(|&(f, g, length, bend)| (f, g, length * bend)).collect();
         let mean_edge = if pairs.is_empty() { 0.0 } else { lengths / pairs.len() as f64 };
         for pair in &mut pairs {
             pair.2 *= SIDE_SMOOTHING * mean_edge;
@@ -2021,46 +2003,9 @@ impl Patch {
 
     /// Two parts of connected faces grown from two far-apart faces (module docs).
     fn halves(&self) -> [Vec<u32>; 2] {
-        let m = self.faces.len();
-        let by_edge = faces_by_edge(self.corners.iter().enumerate().map(|(t, &c)| (t as u32, c)));
-        let mut adj: Vec<Vec<u32>> = vec![Vec::new(); m];
-        for (t, c) in self.corners.iter().enumerate() {
-            for k in 0..3 {
-                let (a, b) = (c[k], c[(k + 1) % 3]);
-                for &o in &by_edge[&(a.min(b), a.max(b))] {
-                    if o as usize != t && !adj[t].contains(&o) {
-                        adj[t].push(o);
-                    }
-                }
-            }
-        }
-        let bfs = |sources: &[u32]| -> (Vec<u32>, Vec<u32>) {
-            let (mut dist, mut owner) = (vec![u32::MAX; m], vec![u32::MAX; m]);
-            let mut queue = std::collections::VecDeque::new();
-            for (i, &s) in sources.iter().enumerate() {
-                dist[s as usize] = 0;
-                owner[s as usize] = i as u32;
-                queue.push_back(s);
-            }
-            while let Some(f) = queue.pop_front() {
-                for &o in &adj[f as usize] {
-                    if dist[o as usize] == u32::MAX {
-                        dist[o as usize] = dist[f as usize] + 1;
-                        owner[o as usize] = owner[f as usize];
-                        queue.push_back(o);
-                    }
-                }
-            }
-            (dist, owner)
-        };
-        let farthest = |dist: &[u32]| -> u32 {
-            (0..m as u32)
-                .max_by_key(|&f| (dist[f as usize] != u32::MAX, dist[f as usize], std::cmp::Reverse(f)))
-                .unwrap_or(0)
-        };
-        let a = farthest(&bfs(&[0]).0);
-        let b = farthest(&bfs(&[a]).0);
-        let (_, owner) = bfs(&[a, b]);
+        let adj = self.face_adjacency();
+        let (a, b, _, _) = far_apart(&adj);
+        let (_, owner) = breadth_first(&adj, &[a, b]);
         let mut halves = [Vec::new(), Vec::new()];
         for (t, &o) in owner.iter().enumerate() {
             // Faces no edge reaches (only possible through collapsed faces) go with the first part.
@@ -2072,6 +2017,140 @@ impl Patch {
         }
         halves
     }
+
+    /// The patch cut in two where a cut between two far-apart faces is shortest (module docs,
+    /// step 4): every face is numbered by its distance in steps from each of the two faces of
+    /// [`Patch::halves`]; a face at most a third of the way from one of them goes with it, and
+    /// the band between is parted by the cut of least summed rest edge length, each edge's
+    /// length weighted by `(1 + cos θ) / 2` of the angle between its faces' normals as in
+    /// [`Patch::sides`] (a seam along a crease costs little), found exactly by a minimum cut.
+    /// Returns the connected parts of that labelling, or [`Patch::halves`] when it gives one.
+    ///
+    /// Why: halving by breadth-first growth parts the faces where the two fronts meet, a seam
+    /// that zigzags along mesh edges wherever the patch happens to be and ignores where the
+    /// surface narrows or folds; an island SLIM cannot flatten whole is cut once per halving, so
+    /// every such seam is seen by the renders.
+    fn cut_in_two(&self, ctx: &Ctx) -> Vec<Vec<u32>> {
+        let adj = self.face_adjacency();
+        let (_, _, from_a, from_b) = far_apart(&adj);
+        let all = self.corners.iter().copied().enumerate();
+        let pairs: Vec<(u32, u32, f64)> = self
+            .edges_between(ctx, all)
+            .into_iter()
+            .map(|(f, g, length, bend)| (f, g, length * bend))
+            .collect();
+        // More than every edge together: a face bound to an end never changes sides.
+        let bound = 1.0 + pairs.iter().map(|p| p.2).sum::<f64>();
+        let unary: Vec<(f64, f64)> = from_a
+            .iter()
+            .zip(&from_b)
+            .map(|(&da, &db)| {
+                let (da, db) = (da as u64, db as u64);
+                if da == u32::MAX as u64 || 3 * da <= da + db {
+                    // Near the first end, or reached by no edge (the first part, as in `halves`).
+                    (0.0, bound)
+                } else if 3 * db <= da + db {
+                    (bound, 0.0)
+                } else {
+                    (0.0, 0.0)
+                }
+            })
+            .collect();
+        let label = crate::mincut::two_labels(&unary, &pairs);
+        let parts = self.components(&label);
+        if parts.len() > 1 { parts } else { self.halves().to_vec() }
+    }
+
+    /// The edges that exactly two of `faces` (patch face indices and their corners) share, as
+    /// `(f, g, rest length, (1 + cos θ) / 2)`, θ the angle between the two faces' normals: what
+    /// [`Patch::sides`] and [`Patch::cut_in_two`] charge for parting two faces (little where
+    /// the surface folds back or bends sharply). Each edge once, in order of its first face.
+    fn edges_between(
+        &self,
+        ctx: &Ctx,
+        faces: impl Iterator<Item = (usize, [u32; 3])> + Clone,
+    ) -> Vec<(u32, u32, f64, f64)> {
+        // Each face's unit normal once (a face meets up to three edges).
+        let normals: Vec<glam::DVec3> = self
+            .faces
+            .iter()
+            .map(|&f| {
+                let [a, b, c] = ctx.mesh.corners(f as usize).map(to_dvec3);
+                (b - a).cross(c - a).normalize_or_zero()
+            })
+            .collect();
+        let by_edge = faces_by_edge(faces.clone().map(|(t, c)| (t as u32, c)));
+        let mut edges = Vec::with_capacity(by_edge.len());
+        for (t, c) in faces {
+            for k in 0..3 {
+                let (a, b) = (c[k], c[(k + 1) % 3]);
+                if let [f, g] = by_edge[&(a.min(b), a.max(b))][..]
+                    && f == t as u32
+                {
+                    let x = &self.rest[t].x;
+                    let length = (x[(k + 1) % 3][0] - x[k][0]).hypot(x[(k + 1) % 3][1] - x[k][1]);
+                    let bend = 0.5 * (1.0 + normals[f as usize].dot(normals[g as usize]));
+                    edges.push((f, g, length, bend));
+                }
+            }
+        }
+        edges
+    }
+
+    /// Each face's neighbours across its edges (in order of first meeting, no repeats).
+    fn face_adjacency(&self) -> Vec<Vec<u32>> {
+        let by_edge = faces_by_edge(self.corners.iter().enumerate().map(|(t, &c)| (t as u32, c)));
+        let mut adj: Vec<Vec<u32>> = vec![Vec::new(); self.faces.len()];
+        for (t, c) in self.corners.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b) = (c[k], c[(k + 1) % 3]);
+                for &o in &by_edge[&(a.min(b), a.max(b))] {
+                    if o as usize != t && !adj[t].contains(&o) {
+                        adj[t].push(o);
+                    }
+                }
+            }
+        }
+        adj
+    }
+}
+
+/// Breadth-first distances in steps over `adj` from `sources`, and which source reached each
+/// node first (`u32::MAX` for both where none does).
+fn breadth_first(adj: &[Vec<u32>], sources: &[u32]) -> (Vec<u32>, Vec<u32>) {
+    let m = adj.len();
+    let (mut dist, mut owner) = (vec![u32::MAX; m], vec![u32::MAX; m]);
+    let mut queue = std::collections::VecDeque::new();
+    for (i, &s) in sources.iter().enumerate() {
+        dist[s as usize] = 0;
+        owner[s as usize] = i as u32;
+        queue.push_back(s);
+    }
+    while let Some(f) = queue.pop_front() {
+        for &o in &adj[f as usize] {
+            if dist[o as usize] == u32::MAX {
+                dist[o as usize] = dist[f as usize] + 1;
+                owner[o as usize] = owner[f as usize];
+                queue.push_back(o);
+            }
+        }
+    }
+    (dist, owner)
+}
+
+/// Two far-apart nodes of `adj` (not empty): `a` the farthest from node 0, `b` the farthest
+/// from `a` (ties to the lower index), and every node's distance in steps from each.
+fn far_apart(adj: &[Vec<u32>]) -> (u32, u32, Vec<u32>, Vec<u32>) {
+    let farthest = |dist: &[u32]| -> u32 {
+        (0..dist.len() as u32)
+            .max_by_key(|&f| (dist[f as usize] != u32::MAX, dist[f as usize], std::cmp::Reverse(f)))
+            .unwrap_or(0)
+    };
+    let a = farthest(&breadth_first(adj, &[0]).0);
+    let from_a = breadth_first(adj, &[a]).0;
+    let b = farthest(&from_a);
+    let from_b = breadth_first(adj, &[b]).0;
+    (a, b, from_a, from_b)
 }
 
 /// `corners` with every unknown whose live faces form several fans given one unknown per fan:
@@ -3547,6 +3626,44 @@ mod tests {
             for (t, &side) in sides.iter().enumerate() {
                 assert_eq!(side == lower(t), mirrored_side_is_lower, "face {t}");
             }
+        });
+    }
+
+    /// A flat strip 30 × 6 units with a neck two units wide at a third and a bit of its length:
+    /// cut in two, it parts across the neck (a seam of 2) where halving by breadth-first growth
+    /// parts it near the middle, across the full width (at least 6).
+    #[test]
+    fn an_island_cut_in_two_parts_at_its_narrowest_place_in_the_middle_band() {
+        let (w, h) = (30u32, 6u32);
+        let id = |i: u32, j: u32| j * (w + 1) + i;
+        let positions: Vec<[f32; 3]> =
+            (0..=h).flat_map(|j| (0..=w).map(move |i| [i as f32, j as f32, 0.0])).collect();
+        let mut triangles = Vec::new();
+        for j in 0..h {
+            for i in 0..w {
+                if i == 12 && !(2..4).contains(&j) {
+                    continue;
+                }
+                triangles.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+                triangles.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+        let coords = positions.iter().map(|p| [p[0] / 30.0, p[1] / 30.0]).collect();
+        let m = TriMesh { positions, uv: Some(UvLayer { coords, triangles: triangles.clone() }), triangles };
+        whole_patch(&m, |patch, ctx| {
+            let parts = patch.cut_in_two(ctx);
+            assert_eq!(parts.len(), 2);
+            let mut all: Vec<u32> = parts.concat();
+            all.sort_unstable();
+            assert_eq!(
+                all,
+                (0..m.triangles.len() as u32).collect::<Vec<_>>(),
+                "the parts cover the patch once"
+            );
+            let cut = patch.cut_length(&parts);
+            assert!((cut - 2.0).abs() < 1e-9, "the cut runs across the neck: {cut}");
+            let halved = patch.cut_length(&patch.halves());
+            assert!(halved >= 6.0 - 1e-9, "halving parts the strip elsewhere: {halved}");
         });
     }
 
