@@ -1,5 +1,6 @@
 //! Two-label energies minimised exactly by a minimum s–t cut: the labelling that
-//! [`crate::injective`] uses to tell the two sides of a thin wall apart.
+//! [`crate::injective`] uses to tell the two sides of a thin wall apart, and to cut an island in
+//! two where the cut across its middle is shortest.
 //!
 //! The energy is `Σ_i cost_i(label_i) + Σ_(i,j) w_ij · [label_i ≠ label_j]` over labels in
 //! `{false, true}`, with non-negative costs and weights (a submodular energy, so the cut is a
