@@ -2033,30 +2033,52 @@ impl Patch {
     fn cut_in_two(&self, ctx: &Ctx) -> Vec<Vec<u32>> {
         let adj = self.face_adjacency();
         let (_, _, from_a, from_b) = far_apart(&adj);
-        let all = self.corners.iter().copied().enumerate();
-        let pairs: Vec<(u32, u32, f64)> = self
-            .edges_between(ctx, all)
-            .into_iter()
-            .map(|(f, g, length, bend)| (f, g, length * bend))
-            .collect();
-        // More than every edge together: a face bound to an end never changes sides.
-        let bound = 1.0 + pairs.iter().map(|p| p.2).sum::<f64>();
-        let unary: Vec<(f64, f64)> = from_a
+        // The end each face is bound to (`false` the first), `None` in the band between.
+        let end: Vec<Option<bool>> = from_a
             .iter()
             .zip(&from_b)
             .map(|(&da, &db)| {
                 let (da, db) = (da as u64, db as u64);
                 if da == u32::MAX as u64 || 3 * da <= da + db {
                     // Near the first end, or reached by no edge (the first part, as in `halves`).
-                    (0.0, bound)
+                    Some(false)
                 } else if 3 * db <= da + db {
-                    (bound, 0.0)
+                    Some(true)
                 } else {
-                    (0.0, 0.0)
+                    None
                 }
             })
             .collect();
-        let label = crate::mincut::two_labels(&unary, &pairs);
+        // Only the band's faces are labelled: an edge from one to a face bound to an end charges
+        // it for taking the other label (the ends contracted into the source and the sink).
+        let mut node = vec![u32::MAX; end.len()];
+        let mut band = Vec::new();
+        for (t, e) in end.iter().enumerate() {
+            if e.is_none() {
+                node[t] = band.len() as u32;
+                band.push(t);
+            }
+        }
+        let mut unary = vec![(0.0, 0.0); band.len()];
+        let mut pairs = Vec::new();
+        let all = self.corners.iter().copied().enumerate();
+        for (f, g, length, bend) in self.edges_between(ctx, all) {
+            let w = length * bend;
+            let (f, g) = (f as usize, g as usize);
+            let mut charge = |t: usize, bound: bool| {
+                let cost = &mut unary[node[t] as usize];
+                if bound { cost.0 += w } else { cost.1 += w }
+            };
+            match (end[f], end[g]) {
+                (None, None) => pairs.push((node[f], node[g], w)),
+                (None, Some(e)) => charge(f, e),
+                (Some(e), None) => charge(g, e),
+                (Some(_), Some(_)) => {}
+            }
+        }
+        let in_band = crate::mincut::two_labels(&unary, &pairs);
+        let label: Vec<bool> =
+            end.iter().enumerate().map(|(t, e)| e.unwrap_or_else(|| in_band[node[t] as usize])).collect();
         let parts = self.components(&label);
         if parts.len() > 1 { parts } else { self.halves().to_vec() }
     }
