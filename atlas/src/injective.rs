@@ -2004,7 +2004,7 @@ impl Patch {
     /// Two parts of connected faces grown from two far-apart faces (module docs).
     fn halves(&self) -> [Vec<u32>; 2] {
         let adj = self.face_adjacency();
-        let (a, b, _, _) = far_apart(&adj);
+        let (a, b, _) = far_apart(&adj);
         let (_, owner) = breadth_first(&adj, &[a, b]);
         let mut halves = [Vec::new(), Vec::new()];
         for (t, &o) in owner.iter().enumerate() {
@@ -2032,7 +2032,8 @@ impl Patch {
     /// every such seam is seen by the renders.
     fn cut_in_two(&self, ctx: &Ctx) -> Vec<Vec<u32>> {
         let adj = self.face_adjacency();
-        let (_, _, from_a, from_b) = far_apart(&adj);
+        let (_, b, from_a) = far_apart(&adj);
+        let from_b = breadth_first(&adj, &[b]).0;
         // The end each face is bound to (`false` the first), `None` in the band between.
         let end: Vec<Option<bool>> = from_a
             .iter()
@@ -2052,14 +2053,14 @@ impl Patch {
         // Only the band's faces are labelled: an edge from one to a face bound to an end charges
         // it for taking the other label (the ends contracted into the source and the sink).
         let mut node = vec![u32::MAX; end.len()];
-        let mut band = Vec::new();
+        let mut band = 0;
         for (t, e) in end.iter().enumerate() {
             if e.is_none() {
-                node[t] = band.len() as u32;
-                band.push(t);
+                node[t] = band;
+                band += 1;
             }
         }
-        let mut unary = vec![(0.0, 0.0); band.len()];
+        let mut unary = vec![(0.0, 0.0); band as usize];
         let mut pairs = Vec::new();
         let all = self.corners.iter().copied().enumerate();
         for (f, g, length, bend) in self.edges_between(ctx, all) {
@@ -2161,8 +2162,8 @@ fn breadth_first(adj: &[Vec<u32>], sources: &[u32]) -> (Vec<u32>, Vec<u32>) {
 }
 
 /// Two far-apart nodes of `adj` (not empty): `a` the farthest from node 0, `b` the farthest
-/// from `a` (ties to the lower index), and every node's distance in steps from each.
-fn far_apart(adj: &[Vec<u32>]) -> (u32, u32, Vec<u32>, Vec<u32>) {
+/// from `a` (ties to the lower index), and every node's distance in steps from `a`.
+fn far_apart(adj: &[Vec<u32>]) -> (u32, u32, Vec<u32>) {
     let farthest = |dist: &[u32]| -> u32 {
         (0..dist.len() as u32)
             .max_by_key(|&f| (dist[f as usize] != u32::MAX, dist[f as usize], std::cmp::Reverse(f)))
@@ -2171,8 +2172,7 @@ fn far_apart(adj: &[Vec<u32>]) -> (u32, u32, Vec<u32>, Vec<u32>) {
     let a = farthest(&breadth_first(adj, &[0]).0);
     let from_a = breadth_first(adj, &[a]).0;
     let b = farthest(&from_a);
-    let from_b = breadth_first(adj, &[b]).0;
-    (a, b, from_a, from_b)
+    (a, b, from_a)
 }
 
 /// `corners` with every unknown whose live faces form several fans given one unknown per fan:
