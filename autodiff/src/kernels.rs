@@ -61,6 +61,12 @@ impl<'a> MatRef<'a> {
         MatRef { data: &self.data[offset..], rows: count, ..self }
     }
 
+    /// The element at row `r`, column `c`.
+    #[inline(always)]
+    pub fn at(&self, r: usize, c: usize) -> f32 {
+        self.data[(r as isize * self.row_stride + c as isize * self.col_stride) as usize]
+    }
+
     /// The view, transposed when `transpose` is set.
     pub fn maybe_t(self, transpose: bool) -> Self {
         if transpose { self.t() } else { self }

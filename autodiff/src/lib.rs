@@ -23,6 +23,7 @@
 //! - Buffers are pooled: after the first step of a fixed-shape loop, steps allocate almost nothing.
 //! - Every kernel is deterministic whatever the thread count (see [`kernels`](crate::kernels)).
 
+mod bf16;
 pub mod gradcheck;
 mod kernels;
 pub mod nn;
@@ -34,6 +35,7 @@ mod shape;
 mod tape;
 mod tensor;
 
+pub use bf16::{MatmulPrecision, bf16_matmul_available};
 pub use ops::Activation;
 pub use params::{ParamId, ParamInfo, ParamStore};
 pub use pool::Pool;

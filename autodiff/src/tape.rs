@@ -7,6 +7,7 @@
 //! Shape errors and use of a stale [`Var`] are programming errors and panic with a message that names
 //! the op and the shapes; user input never reaches the tape unvalidated.
 
+use crate::bf16::MatmulPrecision;
 use crate::ops::Op;
 use crate::params::{ParamId, ParamStore};
 use crate::pool::{Buf, Pool};
@@ -59,6 +60,9 @@ pub struct Tape {
     pub(crate) f32_arena: Vec<f32>,
     generation: u32,
     backward_done: bool,
+    /// What the fused linear layers recorded from now on multiply in (already effective on this
+    /// machine: [`MatmulPrecision::effective`]).
+    pub(crate) matmul_precision: MatmulPrecision,
 }
 
 impl Default for Tape {
@@ -82,7 +86,21 @@ impl Tape {
             f32_arena: Vec::new(),
             generation: 0,
             backward_done: false,
+            matmul_precision: MatmulPrecision::F32,
         }
+    }
+
+    /// Sets the arithmetic of the fused linear layers recorded from now on
+    /// ([`Tape::linear`]); a precision this machine cannot run falls back to f32
+    /// ([`MatmulPrecision::effective`]). Returns the precision that will run.
+    pub fn set_matmul_precision(&mut self, precision: MatmulPrecision) -> MatmulPrecision {
+        self.matmul_precision = precision.effective();
+        self.matmul_precision
+    }
+
+    /// The arithmetic the fused linear layers run at ([`Tape::set_matmul_precision`]).
+    pub fn matmul_precision(&self) -> MatmulPrecision {
+        self.matmul_precision
     }
 
     /// The parameters.

@@ -9,7 +9,7 @@ use std::time::Instant;
 
 use nuvo_autodiff::nn::{Mlp, MlpConfig};
 use nuvo_autodiff::optim::{Adam, AdamConfig};
-use nuvo_autodiff::{Activation, ParamStore, Shape, Tape, Tensor};
+use nuvo_autodiff::{Activation, MatmulPrecision, ParamStore, Shape, Tape, Tensor};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
@@ -37,6 +37,9 @@ pub struct BenchArgs {
     /// `step`: the mesh to sample.
     #[arg(long, default_value = "assets/stanford-bunny.obj")]
     mesh: std::path::PathBuf,
+    /// `step`, `mlp`: the networks' arithmetic (`training.matmul`): `f32`, or `bf16` on AMX tiles.
+    #[arg(long, value_parser = ["f32", "bf16"], default_value = "f32")]
+    matmul: String,
     /// `step`: time the steps of a trained run instead (its folder or checkpoint; its stored config,
     /// its networks as trained), so settings that depend on the trained state (such as
     /// `training.chart_support`) are timed as they run late in training. Ignores the sizing flags.
@@ -85,13 +88,14 @@ fn step_case(args: &BenchArgs) -> anyhow::Result<()> {
     }
     let text = format!(
         "[geometry]\nsource = \"mesh\"\npath = {:?}\n[model]\ncharts = {}\ndepth = {}\nwidth = {}\n\
-         [training]\nsteps = 1000\nbatch_3d = {}\nbatch_uv = {}\n",
+         [training]\nsteps = 1000\nbatch_3d = {}\nbatch_uv = {}\nmatmul = {:?}\n",
         args.mesh.display().to_string(),
         args.charts,
         args.depth,
         args.width,
         args.batch,
-        args.batch
+        args.batch,
+        args.matmul
     );
     let loaded = nuvo_core::config::from_str("bench.toml", &text)?;
     let mut trainer = nuvo_core::Trainer::new(
@@ -99,6 +103,7 @@ fn step_case(args: &BenchArgs) -> anyhow::Result<()> {
         &nuvo_geometry::SourceRegistry::with_builtins(),
         &nuvo_losses::LossRegistry::with_builtins(),
     )?;
+    crate::train::report_matmul(&trainer);
     let (c, t, s) = trainer.model().macs_per_point();
     let (n, b) = (args.charts as f64, args.batch as f64);
     // Forward MACs: c(x), t_i at x and two offsets, s_i(t_i(x)); s_i(u), t_i(s_i(u)), c(s_i(u)).
@@ -125,6 +130,7 @@ fn step_case(args: &BenchArgs) -> anyhow::Result<()> {
 /// Steps of a trained run, continued from its checkpoint (see `BenchArgs::from`).
 fn trained_step_case(args: &BenchArgs, run: &std::path::Path) -> anyhow::Result<()> {
     let (mut trainer, _, ckpt) = crate::train::restore_run(run, &args.set)?;
+    crate::train::report_matmul(&trainer);
     let t = &trainer.config().training;
     let sizes = format!("batch {}+{}, chart_support {}", t.batch_3d, t.batch_uv, t.chart_support);
     let (median, min) = time_steps(&mut trainer, args.iters)?;
@@ -207,6 +213,11 @@ fn mlp_case(args: &BenchArgs, depth: usize, width: usize) -> anyhow::Result<()> 
         (0..b * in_dim).map(|i| ((i * 31 % 200) as f32 - 100.0) / 100.0).collect(),
     );
     let mut tape = Tape::new(params);
+    tape.set_matmul_precision(if args.matmul == "bf16" {
+        MatmulPrecision::Bf16
+    } else {
+        MatmulPrecision::F32
+    });
     let fwd_flops = 2.0 * (b * mlp.macs_per_row()) as f64;
     let step_flops = 3.0 * fwd_flops - 2.0 * (b * in_dim * width) as f64;
     let mut step = |with_adam: bool| {

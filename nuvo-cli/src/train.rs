@@ -158,6 +158,21 @@ pub(crate) fn restore_run(
     Ok((trainer, loaded, ckpt_path))
 }
 
+/// Says what `training.matmul` asked for when it is not f32, and whether this CPU runs it.
+pub(crate) fn report_matmul(trainer: &Trainer) {
+    use nuvo_autodiff::MatmulPrecision;
+    match (trainer.config().training.matmul, trainer.matmul_precision()) {
+        (MatmulPrecision::Bf16, MatmulPrecision::Bf16) => {
+            println!("matmul: bf16 factors, f32 accumulation, on AMX tiles (training.matmul)")
+        }
+        (MatmulPrecision::Bf16, _) => eprintln!(
+            "warning: training.matmul = \"bf16\" needs a CPU with AMX-BF16 (and a kernel that grants it); \
+             this one trains in f32"
+        ),
+        _ => {}
+    }
+}
+
 fn build_trainer(loaded: &LoadedConfig) -> anyhow::Result<Trainer> {
     let started = Instant::now();
     let trainer = Trainer::new(loaded, &SourceRegistry::with_builtins(), &LossRegistry::with_builtins())?;
@@ -178,6 +193,7 @@ fn build_trainer(loaded: &LoadedConfig) -> anyhow::Result<Trainer> {
         .map(|t| format!("{}×{}", t.name, t.weight))
         .collect();
     println!("losses: {}", terms.join(", "));
+    report_matmul(&trainer);
     let tau = trainer.config().training.chart_support;
     if tau > 0.0 {
         println!("chart support: the c(x)-weighted losses evaluate chart i only where c(x)[i] ≥ {tau:e}");

@@ -221,6 +221,7 @@ pub fn run_unwrap(args: &UnwrapArgs) -> anyhow::Result<()> {
     // length follows the step count).
     let losses = LossRegistry::with_builtins();
     let mut trainer = Trainer::with_source(&loaded, source, &losses)?;
+    crate::train::report_matmul(&trainer);
     if user_set("training.steps") {
         decisions.push(decision("steps", trainer.total_steps(), "set with --set training.steps"));
     } else {

@@ -15,8 +15,8 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-use nuvo_autodiff::Activation;
 use nuvo_autodiff::nn::Init;
+use nuvo_autodiff::{Activation, MatmulPrecision};
 use serde::{Deserialize, Serialize};
 
 /// The whole experiment.
@@ -162,6 +162,12 @@ pub struct TrainingConfig {
     /// (`crate::trainer::ONE_CHART_SHAPE_SETTLED`). Not in the paper.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub stop_when_settled: Option<f32>,
+    /// Arithmetic of the networks' products while training: `"f32"` (the default) or `"bf16"`,
+    /// factors rounded to bfloat16 and accumulated in f32 on the AMX tiles of CPUs that have them
+    /// (Intel Xeon since Sapphire Rapids), f32 elsewhere (the run's log says which ran). Faster;
+    /// the atlas differs from an f32 run's as another seed's would (BENCHMARKS.md). The bake
+    /// always evaluates the networks in f32. Not in the paper.
+    pub matmul: MatmulPrecision,
     /// Finite-difference step of the distortion losses, in the model frame (the paper: 1e-2).
     pub epsilon: f32,
     /// Write a checkpoint every this many steps (and at the end).
@@ -180,6 +186,7 @@ impl Default for TrainingConfig {
             chart_support: 0.0,
             time_budget_minutes: None,
             stop_when_settled: None,
+            matmul: MatmulPrecision::F32,
             epsilon: 1e-2,
             checkpoint_every: 250,
             max_bad_steps: 20,
@@ -964,6 +971,11 @@ mod tests {
         }
         let c = from_str("c.toml", &format!("{MINIMAL}[training]\nstop_when_settled = 0.015\n")).unwrap();
         assert_eq!(c.config.training.stop_when_settled, Some(0.015));
+        assert_eq!(from_str("c.toml", MINIMAL).unwrap().config.training.matmul, MatmulPrecision::F32);
+        let c = from_str("c.toml", &format!("{MINIMAL}[training]\nmatmul = \"bf16\"\n")).unwrap();
+        assert_eq!(c.config.training.matmul, MatmulPrecision::Bf16);
+        let e = from_str("c.toml", &format!("{MINIMAL}[training]\nmatmul = \"f16\"\n")).unwrap_err().to_string();
+        assert!(e.contains("training.matmul") && e.contains("bf16"), "{e}");
     }
 
     #[test]

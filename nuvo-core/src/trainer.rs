@@ -212,11 +212,13 @@ impl Trainer {
             warmup_steps: o.warmup_steps,
             final_factor: o.final_lr_factor,
         };
+        let mut tape = Tape::new(params);
+        tape.set_matmul_precision(config.training.matmul);
         Ok(Trainer {
             config,
             source,
             model,
-            tape: Tape::new(params),
+            tape,
             adam,
             schedule,
             terms,
@@ -228,6 +230,12 @@ impl Trainer {
             settled_looks: 0,
             full_batches: false,
         })
+    }
+
+    /// The arithmetic the networks' products train in on this machine: `training.matmul`, or f32
+    /// where the CPU cannot run bf16 ([`nuvo_autodiff::MatmulPrecision::effective`]).
+    pub fn matmul_precision(&self) -> nuvo_autodiff::MatmulPrecision {
+        self.tape.matmul_precision()
     }
 
     /// The config being trained.

@@ -2,7 +2,7 @@
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use nuvo_autodiff::{Shape, Var};
+use nuvo_autodiff::{MatmulPrecision, Shape, Var};
 use nuvo_core::config::{self, LoadedConfig};
 use nuvo_core::run::{RunOptions, Silent, files, run};
 use nuvo_core::trainer::ONE_CHART_SHAPE_SETTLED;
@@ -481,6 +481,31 @@ fn pruned_steps_do_not_depend_on_the_thread_count() {
         param_values(&t)
     };
     assert!(params_with(1) == params_with(2), "1 and 2 threads differ");
+}
+
+#[test]
+fn bf16_steps_do_not_depend_on_the_thread_count_and_differ_from_f32() {
+    // Only where the CPU multiplies bf16 on AMX tiles; elsewhere `training.matmul = "bf16"` trains
+    // in f32 and the run must say so (the trainer reports the precision that runs).
+    let params_with = |threads: usize, matmul: MatmulPrecision| {
+        let mut cfg = small("[warm_start]\nsteps = 3\n");
+        cfg.config.model.width = 64;
+        cfg.config.training.batch_3d = 700;
+        cfg.config.training.matmul = matmul;
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        let mut t = trainer(&cfg);
+        let runs = t.matmul_precision();
+        pool.install(|| (0..6).for_each(|_| drop(t.step().unwrap())));
+        (param_values(&t), runs)
+    };
+    let (bf16, runs) = params_with(1, MatmulPrecision::Bf16);
+    if !nuvo_autodiff::bf16_matmul_available() {
+        assert_eq!(runs, MatmulPrecision::F32);
+        return;
+    }
+    assert_eq!(runs, MatmulPrecision::Bf16);
+    assert!(bf16 == params_with(2, MatmulPrecision::Bf16).0, "1 and 2 threads differ");
+    assert!(bf16 != params_with(1, MatmulPrecision::F32).0, "bf16 trained the f32 bits");
 }
 
 #[test]

@@ -15,6 +15,7 @@ use super::Op;
 use super::unary::sigmoid;
 use rayon::prelude::*;
 
+use crate::bf16::{MatmulPrecision, PackedRight, gemm_bf16, gemm_bf16_single_thread, tiles_take};
 use crate::kernels::{self, MatRef, ROW_BLOCK, gemm, gemm_single_thread};
 use crate::shape::Shape;
 use crate::tape::{GradSink, Reader, Tape, Var};
@@ -70,8 +71,10 @@ impl Tape {
         let mut out = self.pool.take(shape.len());
         let (xv, wv) = (MatRef::new(self.value(x), sx), MatRef::new(self.value(w), sw));
         let bias = b.map(|b| self.value(b));
+        let precision = self.matmul_precision;
+        let right = Right::of(wv, precision);
         let finish_block = |first_row: usize, block: &mut [f32]| {
-            gemm_single_thread(block, xv.row_range(first_row, block.len() / shape.cols), wv, false);
+            right.product(block, xv.row_range(first_row, block.len() / shape.cols), false);
             for row in block.chunks_exact_mut(shape.cols) {
                 match bias {
                     Some(bias) => row.iter_mut().zip(bias).for_each(|(y, &b)| *y = act.apply(*y + b)),
@@ -82,7 +85,7 @@ impl Tape {
         };
         for_each_row_block(out.as_mut_slice(), shape.cols, sx.rows * sx.cols * sw.cols, finish_block);
         let inputs = [x, w, b.unwrap_or(w)];
-        self.push(Op::Linear { x, w, b, act }, shape, out, &inputs)
+        self.push(Op::Linear { x, w, b, act, precision }, shape, out, &inputs)
     }
 }
 
@@ -96,27 +99,23 @@ pub(crate) fn backward(
     w: Var,
     b: Option<Var>,
     act: Activation,
+    precision: MatmulPrecision,
 ) {
     let (sx, sw) = (r.shape(x), r.shape(w));
     let cols = sw.cols;
     if cols == 0 || sx.rows == 0 {
         return; // no output: every gradient of this layer is empty or zero-rows
     }
-    let wt = MatRef::new(r.value(w), sw).t();
     let want_db = b.filter(|&b| s.needs(b));
     let mut dx = (s.needs(x) && sx.cols > 0).then(|| s.slot(x));
+    let wt = dx.as_ref().map(|_| Right::of(MatRef::new(r.value(w), sw).t(), precision));
     // Per block: dz = g ⊙ act'(y) in place, the block's bias-gradient sums, and dx = dz·Wᵀ.
     let finish_block = |g_block: &mut [f32], y_block: &[f32], dx_block: Option<(&mut [f32], bool)>| {
         if act != Activation::Identity {
             g_block.iter_mut().zip(y_block).for_each(|(g, &y)| *g *= act.derivative_from_output(y));
         }
-        if let Some((dx_block, fresh)) = dx_block {
-            gemm_single_thread(
-                dx_block,
-                MatRef::new(g_block, Shape::new(g_block.len() / cols, cols)),
-                wt,
-                !fresh,
-            );
+        if let (Some((dx_block, fresh)), Some(wt)) = (dx_block, wt.as_ref()) {
+            wt.product(dx_block, MatRef::new(g_block, Shape::new(g_block.len() / cols, cols)), !fresh);
         }
         want_db.map(|_| kernels::dense_block_sums(g_block, cols))
     };
@@ -139,7 +138,38 @@ pub(crate) fn backward(
     if s.needs(w) {
         let (dw, fresh) = s.slot(w);
         let dz = MatRef::new(g, Shape::new(sx.rows, cols));
-        gemm(dw, MatRef::new(r.value(x), sx).t(), dz, !fresh);
+        let xt = MatRef::new(r.value(x), sx).t();
+        if precision == MatmulPrecision::Bf16 && tiles_take(sx.rows, cols) {
+            gemm_bf16(dw, xt, &PackedRight::new(dz), !fresh);
+        } else {
+            gemm(dw, xt, dz, !fresh);
+        }
+    }
+}
+
+/// The right factor of a layer's row-block products (`W` forward, `Wᵀ` for `dx`): as it is for
+/// f32, packed once for the tiles when the layer runs in bf16 and the shape takes them
+/// ([`crate::bf16`]).
+enum Right<'a> {
+    F32(MatRef<'a>),
+    Bf16(PackedRight),
+}
+
+impl<'a> Right<'a> {
+    fn of(b: MatRef<'a>, precision: MatmulPrecision) -> Self {
+        if precision == MatmulPrecision::Bf16 && tiles_take(b.rows, b.cols) {
+            Right::Bf16(PackedRight::new(b))
+        } else {
+            Right::F32(b)
+        }
+    }
+
+    /// `dst = a·self` (or `+=`) on the calling thread.
+    fn product(&self, dst: &mut [f32], a: MatRef<'_>, accumulate: bool) {
+        match self {
+            Right::F32(b) => gemm_single_thread(dst, a, *b, accumulate),
+            Right::Bf16(b) => gemm_bf16_single_thread(dst, a, b, accumulate),
+        }
     }
 }
 
@@ -174,13 +204,24 @@ mod tests {
     /// Gradients of `Σ r ⊙ layer(x, w, b)` for x, w, b; `fused` picks `Tape::linear` or the same layer
     /// composed from unfused ops (`relu(x·w + 1·b)`).
     fn gradients(fused: bool, threads: usize) -> Vec<Vec<f32>> {
+        gradients_of(fused, threads, MatmulPrecision::F32, &filled)
+    }
+
+    /// [`gradients`] at `precision`, the tensors made by `fill(rows, cols, salt)`.
+    fn gradients_of(
+        fused: bool,
+        threads: usize,
+        precision: MatmulPrecision,
+        fill: &(dyn Fn(usize, usize, usize) -> Tensor + Sync),
+    ) -> Vec<Vec<f32>> {
         let (rows, i, o) = (1100, 24, 40); // three row blocks, the last a short one
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
         pool.install(|| {
             let mut t = Tape::default();
-            let x = t.leaf(&filled(rows, i, 1));
-            let w = t.leaf(&filled(i, o, 2));
-            let b = t.leaf(&filled(1, o, 3));
+            t.set_matmul_precision(precision);
+            let x = t.leaf(&fill(rows, i, 1));
+            let w = t.leaf(&fill(i, o, 2));
+            let b = t.leaf(&fill(1, o, 3));
             let y = if fused {
                 t.linear(x, w, Some(b), Activation::Relu)
             } else {
@@ -189,7 +230,7 @@ mod tests {
                 let z = t.add(xw, bias);
                 t.relu(z)
             };
-            let r = t.input(&filled(rows, o, 4));
+            let r = t.input(&fill(rows, o, 4));
             let weighted = t.mul(y, r);
             let loss = t.sum_all(weighted);
             t.backward(loss);
@@ -207,6 +248,42 @@ mod tests {
             for (g, w) in got.iter().zip(want) {
                 assert!((g - w).abs() <= 1e-5 * scale, "{name}: {g} vs {w}");
             }
+        }
+    }
+
+    /// Small integers: every bf16 rounding and every f32 sum of the layer is exact, so a layer whose
+    /// three products run on the tiles must give the f32 layer's values bit for bit (a known answer
+    /// for the plumbing: forward, `dx` and `dW` each take the tile path at these sizes).
+    #[test]
+    fn a_bf16_layer_on_exact_values_gives_the_f32_gradients() {
+        if !crate::bf16_matmul_available() {
+            eprintln!("no AMX bf16 on this machine: the tile path is not exercised");
+            return;
+        }
+        let ints = |rows: usize, cols: usize, salt: usize| {
+            let v = (0..rows * cols).map(|i| ((i * 7919 + salt * 104_729) % 17) as f32 - 8.0);
+            Tensor::from_vec(rows, cols, v.collect())
+        };
+        let want = gradients_of(true, 1, MatmulPrecision::F32, &ints);
+        assert!(gradients_of(true, 1, MatmulPrecision::Bf16, &ints) == want);
+        assert!(gradients_of(true, 2, MatmulPrecision::Bf16, &ints) == want);
+    }
+
+    /// General values: bf16 layers stay within the factors' rounding of the f32 gradients, and
+    /// their bits do not depend on the thread count.
+    #[test]
+    fn a_bf16_layer_is_close_to_f32_and_deterministic() {
+        let want = gradients(true, 1);
+        let got = gradients_of(true, 1, MatmulPrecision::Bf16, &filled);
+        assert!(gradients_of(true, 2, MatmulPrecision::Bf16, &filled) == got, "two threads changed the bits");
+        // In norm: a ReLU whose input the rounding moves across zero changes its row's terms
+        // wholly, which no per-element bound allows.
+        for (name, (got, want)) in ["dx", "dw", "db"].iter().zip(got.iter().zip(&want)) {
+            let norm = |v: &mut dyn Iterator<Item = f32>| v.map(|x| (x as f64).powi(2)).sum::<f64>().sqrt();
+            let error = norm(&mut got.iter().zip(want).map(|(g, w)| g - w));
+            let size = norm(&mut want.iter().copied());
+            assert!(error <= 3e-2 * size, "{name}: error {error} against norm {size}");
+            assert!(error > 0.0, "{name}: bf16 gave the f32 bits on general values");
         }
     }
 }

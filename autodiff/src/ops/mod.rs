@@ -20,6 +20,7 @@ mod vector;
 pub use linear::Activation;
 pub use posenc::posenc_width;
 
+use crate::bf16::MatmulPrecision;
 use crate::kernels;
 use crate::params::ParamId;
 use crate::shape::Shape;
@@ -49,6 +50,8 @@ pub(crate) enum Op {
         w: Var,
         b: Option<Var>,
         act: Activation,
+        /// The precision the products ran at (already [`crate::MatmulPrecision::effective`]).
+        precision: MatmulPrecision,
     },
     Binary {
         kind: BinaryKind,
@@ -117,7 +120,7 @@ pub(crate) fn backward(op: &Op, r: &Reader<'_>, s: &mut GradSink<'_>, out: &[f32
     match *op {
         Op::Leaf | Op::Param(_) | Op::StopGrad => {}
         Op::MatMul { a, b, ta, tb } => matmul::backward(r, s, g, a, b, ta, tb),
-        Op::Linear { x, w, b, act } => linear::backward(r, s, out, g, x, w, b, act),
+        Op::Linear { x, w, b, act, precision } => linear::backward(r, s, out, g, x, w, b, act, precision),
         Op::Binary { kind, a, b } => binary::backward(r, s, out, g, kind, a, b),
         Op::Unary { kind, a } => unary::backward(r, s, out, g, kind, a),
         Op::Softmax { a, log } => softmax::backward(r, s, out, g, a, log),

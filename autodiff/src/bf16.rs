@@ -1,0 +1,723 @@
+//! Matrix products with bf16 inputs and f32 accumulation on the AMX tiles of recent Intel Xeons
+//! (Sapphire Rapids and later): the lower-precision lever of issue 20.
+//!
+//! [`MatmulPrecision::Bf16`] asks the fused linear layers ([`crate::Tape::linear`]) to round both
+//! factors of each of their three products (forward `x·W`, backward `dz·Wᵀ` and `xᵀ·dz`) to
+//! bfloat16 and multiply them on the tiles, accumulating in f32. On a CPU without AMX (or where
+//! the kernel refuses the tile permission) the layers run in f32 exactly as with
+//! [`MatmulPrecision::F32`], and [`bf16_matmul_available`] says so.
+//!
+//! Definitions and invariants (exact):
+//! - **Rounding**: each f32 factor is rounded to the nearest bf16, ties to even (the top 16 bits
+//!   after adding `0x7fff` plus the lowest kept bit); NaNs stay NaNs. So a factor that is already a
+//!   bf16 value (8 significant bits) is used exactly, and a product of such values whose partial
+//!   sums are exact in f32 equals the f32 product bit for bit (the unit tests' known answers).
+//! - **Accumulation**: `TDPBF16PS` adds, per output element, the products of 32 consecutive inner
+//!   indices to its f32 accumulator; the inner dimension is walked in blocks of 32 in increasing
+//!   order, zero-padded at its end. With `accumulate`, the finished block product is added to the
+//!   destination once at the end (`dst + A·B`, not interleaved).
+//! - **Determinism**: each output element's sum is formed in the same order whatever the row
+//!   range of the call, its position within it, and the thread that runs it (no split of the inner
+//!   dimension, ever). So results are bit-identical for any thread count, and a product computed
+//!   in row blocks equals the whole product's rows, as the f32 path promises
+//!   ([`crate::kernels`]).
+//! - **Which products**: those whose inner dimension and output width are both at least
+//!   [`MIN_SIDE`]; narrower ones (a 2-wide UV head, a 3-wide position head) stay f32, where the
+//!   tiles would mostly multiply padding. The rule depends on the shape only.
+//! - **Tiles**: one 32×32 output block at a time in four accumulator tiles (`tmm0..3`), two
+//!   16×32 tiles of the left factor (`tmm4, 5`) and two 32×16 tiles of the right factor in VNNI
+//!   pairs (`tmm6, 7`). The right factor is packed once per product ([`PackedRight`]), the left
+//!   one 32 rows at a time into a per-thread buffer.
+//!
+//! Permission: Linux gives a process the AMX state only after it asks
+//! (`arch_prctl(ARCH_REQ_XCOMP_PERM, XFEATURE_XTILEDATA)`); [`bf16_matmul_available`] asks once,
+//! after CPUID says the CPU has AMX-TILE and AMX-BF16. Using a tile instruction without it is a
+//! SIGILL, so every kernel entry is behind that check.
+
+use std::cell::RefCell;
+use std::sync::OnceLock;
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::kernels::MatRef;
+
+/// The arithmetic of the fused linear layers' products.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MatmulPrecision {
+    /// f32 factors, f32 accumulation (the `gemm` crate's kernels).
+    #[default]
+    F32,
+    /// bf16 factors, f32 accumulation, on AMX tiles where the CPU has them (module docs); f32
+    /// elsewhere.
+    Bf16,
+}
+
+impl MatmulPrecision {
+    /// The precision the layers actually run at on this machine: `Bf16` only where
+    /// [`bf16_matmul_available`].
+    pub fn effective(self) -> MatmulPrecision {
+        match self {
+            MatmulPrecision::Bf16 if bf16_matmul_available() => MatmulPrecision::Bf16,
+            _ => MatmulPrecision::F32,
+        }
+    }
+}
+
+/// Products whose inner dimension or output width is below this stay f32 (module docs).
+pub(crate) const MIN_SIDE: usize = 16;
+
+/// Output rows and columns of one block of tiles.
+const BLOCK: usize = 32;
+/// The inner dimension consumed by one `TDPBF16PS`, in bf16 elements.
+const INNER: usize = 32;
+
+/// Whether this process can multiply on AMX tiles in bf16: the CPU has AMX-TILE and AMX-BF16 and
+/// the kernel granted the tile state (module docs). Asked once; later calls read the answer.
+pub fn bf16_matmul_available() -> bool {
+    static AVAILABLE: OnceLock<bool> = OnceLock::new();
+    *AVAILABLE.get_or_init(detect_and_request)
+}
+
+#[cfg(all(target_arch = "x86_64", target_os = "linux"))]
+fn detect_and_request() -> bool {
+    // CPUID leaf 7, sub-leaf 0: EDX bit 22 AMX-BF16, bit 24 AMX-TILE.
+    let leaf7 = std::arch::x86_64::__cpuid_count(7, 0);
+    let has_amx = leaf7.edx & (1 << 22) != 0 && leaf7.edx & (1 << 24) != 0;
+    // The packing runs on AVX-512F, which every CPU with AMX has; checked all the same.
+    if !has_amx || !std::arch::is_x86_feature_detected!("avx512f") {
+        return false;
+    }
+    const ARCH_REQ_XCOMP_PERM: libc::c_long = 0x1023;
+    const XFEATURE_XTILEDATA: libc::c_long = 18;
+    // SAFETY: a plain system call with integer arguments; it changes only this process's permitted
+    // extended state (it fails, returning -1, on kernels without AMX support).
+    unsafe { libc::syscall(libc::SYS_arch_prctl, ARCH_REQ_XCOMP_PERM, XFEATURE_XTILEDATA) == 0 }
+}
+
+#[cfg(not(all(target_arch = "x86_64", target_os = "linux")))]
+fn detect_and_request() -> bool {
+    false
+}
+
+/// Whether a product with inner dimension `k` and output width `n` runs on the tiles when the
+/// layer asks for bf16 (module docs: shape only).
+pub(crate) fn tiles_take(k: usize, n: usize) -> bool {
+    k >= MIN_SIDE && n >= MIN_SIDE
+}
+
+/// The f32 with bits `bits` rounded to the nearest bf16, ties to even, in the high half (the low
+/// half zero); a NaN becomes the quiet NaN `0x7fc0` (module docs).
+#[inline(always)]
+fn rounded(bits: u32) -> u32 {
+    if bits & 0x7fff_ffff > 0x7f80_0000 {
+        0x7fc0_0000
+    } else {
+        bits.wrapping_add(0x7fff + ((bits >> 16) & 1)) & 0xffff_0000
+    }
+}
+
+/// `x` rounded to the nearest bf16, as its bits.
+#[cfg(test)]
+fn to_bf16(x: f32) -> u16 {
+    (rounded(x.to_bits()) >> 16) as u16
+}
+
+/// Two consecutive inner-index values as the tiles read them: one 32-bit word, the even index's
+/// bf16 in the low half.
+#[inline(always)]
+fn pair(even: f32, odd: f32) -> u32 {
+    rounded(odd.to_bits()) | (rounded(even.to_bits()) >> 16)
+}
+
+/// `a`'s element at `(r, c)`, 0 outside it (the padding).
+#[inline(always)]
+fn get(a: MatRef<'_>, r: usize, c: usize) -> f32 {
+    if r < a.rows && c < a.cols { a.at(r, c) } else { 0.0 }
+}
+
+/// Offset of `a`'s element `(r, c)` in its data.
+#[inline(always)]
+fn offset(a: MatRef<'_>, r: usize, c: usize) -> usize {
+    (r as isize * a.row_stride + c as isize * a.col_stride) as usize
+}
+
+/// Fills the 16 × 16 words `block` with `m`'s pairs down its columns: `block[q · 16 + c]` the pair
+/// `(m[i0 + 2q][c0 + c], m[i0 + 2q + 1][c0 + c])`, 0 outside `m`. Rows of `m` whose 16 values are
+/// contiguous are read as runs.
+#[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx512f"))]
+unsafe fn pairs_down(block: &mut [u32; 256], m: MatRef<'_>, i0: usize, c0: usize) {
+    if m.col_stride == 1 && i0 + 32 <= m.rows && c0 + 16 <= m.cols {
+        for (q, words) in block.chunks_exact_mut(16).enumerate() {
+            let s0 = offset(m, i0 + 2 * q, c0);
+            let s1 = offset(m, i0 + 2 * q + 1, c0);
+            let (even, odd) = (&m.data[s0..s0 + 16], &m.data[s1..s1 + 16]);
+            words.iter_mut().zip(even.iter().zip(odd)).for_each(|(w, (&e, &o))| *w = pair(e, o));
+        }
+    } else {
+        for (q, words) in block.chunks_exact_mut(16).enumerate() {
+            for (c, w) in words.iter_mut().enumerate() {
+                *w = pair(get(m, i0 + 2 * q, c0 + c), get(m, i0 + 2 * q + 1, c0 + c));
+            }
+        }
+    }
+}
+
+/// `words[q]` = the pair `(src[2q], src[2q + 1])`, `src` twice as long as `words`; in runs of 16
+/// words, which the compiler turns into vector shuffles (a loop over `chunks_exact(2)` stays
+/// scalar).
+#[inline(always)]
+fn pairs_of_row(words: &mut [u32], src: &[f32]) {
+    debug_assert_eq!(src.len(), 2 * words.len());
+    let mut runs = words.chunks_exact_mut(16);
+    let mut from = src.chunks_exact(32);
+    for (w, s) in (&mut runs).zip(&mut from) {
+        let (w, s): (&mut [u32; 16], &[f32; 32]) = (w.try_into().unwrap(), s.try_into().unwrap());
+        for q in 0..16 {
+            w[q] = pair(s[2 * q], s[2 * q + 1]);
+        }
+    }
+    for (w, p) in runs.into_remainder().iter_mut().zip(from.remainder().chunks_exact(2)) {
+        *w = pair(p[0], p[1]);
+    }
+}
+
+/// Fills the 16 × 16 words `block` with `m`'s pairs along its rows: `block[r · 16 + q]` the pair
+/// `(m[r0 + r][k0 + 2q], m[r0 + r][k0 + 2q + 1])`, 0 outside `m`. Rows whose 32 values are
+/// contiguous are read as runs.
+#[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx512f"))]
+unsafe fn pairs_along(block: &mut [u32; 256], m: MatRef<'_>, r0: usize, k0: usize) {
+    if m.col_stride == 1 && r0 + 16 <= m.rows && k0 + 32 <= m.cols {
+        for (r, words) in block.chunks_exact_mut(16).enumerate() {
+            let s = offset(m, r0 + r, k0);
+            pairs_of_row(words, &m.data[s..s + 32]);
+        }
+    } else {
+        for (r, words) in block.chunks_exact_mut(16).enumerate() {
+            for (q, w) in words.iter_mut().enumerate() {
+                *w = pair(get(m, r0 + r, k0 + 2 * q), get(m, r0 + r, k0 + 2 * q + 1));
+            }
+        }
+    }
+}
+
+/// The right factor `B` (`k × n`) of a product, rounded to bf16 and laid out for the tiles: `kp / 2`
+/// rows of `np` words, word `(q, j)` the pair `(B[2q][j], B[2q+1][j])` (the VNNI layout
+/// `TDPBF16PS` reads), `kp` = `k` rounded up to 32, `np` = `n` rounded up to 32, zeros in the
+/// padding. A tile of 16 columns is 16 word rows `np` words apart.
+pub(crate) struct PackedRight {
+    data: Vec<u32>,
+    k: usize,
+    n: usize,
+    /// Inner dimension rounded up to [`INNER`].
+    kp: usize,
+    /// Columns rounded up to [`BLOCK`].
+    np: usize,
+}
+
+impl PackedRight {
+    /// Packs `b` (any strides), blocks of rows in parallel when it is large. A row-major `b` (an
+    /// activation gradient `dz`) is read row by row; a transposed one (a weight `Wᵀ`, whose columns
+    /// are contiguous) 16 × 16 words at a time, transposed in registers.
+    ///
+    /// # Panics
+    /// When [`bf16_matmul_available`] is false (the packing uses AVX-512, which every CPU with
+    /// AMX has).
+    pub(crate) fn new(b: MatRef<'_>) -> Self {
+        assert!(bf16_matmul_available(), "PackedRight on a machine without AMX bf16");
+        let (k, n) = (b.rows, b.cols);
+        let (kp, np) = (k.next_multiple_of(INNER), n.next_multiple_of(BLOCK));
+        let mut data = vec![0u32; kp / 2 * np];
+        let chunk = 16 * np; // 16 word rows: one tile's height
+        // SAFETY: AVX-512F is present where AMX is (asserted above).
+        let fill = |(c, rows): (usize, &mut [u32])| unsafe { pack_right_rows(rows, b, 16 * c, np) };
+        if k * n >= 1 << 16 {
+            data.par_chunks_mut(chunk).enumerate().for_each(fill);
+        } else {
+            data.chunks_mut(chunk).enumerate().for_each(fill);
+        }
+        PackedRight { data, k, n, kp, np }
+    }
+}
+
+/// Word rows `q0 .. q0 + 16` of [`PackedRight`]'s layout (`rows`, zeroed, `np` words each).
+///
+/// # Safety
+/// The CPU must have AVX-512F.
+#[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx512f"))]
+unsafe fn pack_right_rows(rows: &mut [u32], b: MatRef<'_>, q0: usize, np: usize) {
+    let (k, n) = (b.rows, b.cols);
+    if b.col_stride == 1 {
+        for (qq, row) in rows.chunks_exact_mut(np).enumerate() {
+            let q = q0 + qq;
+            if 2 * q >= k {
+                break;
+            }
+            let even = &b.data[offset(b, 2 * q, 0)..][..n];
+            if 2 * q + 1 < k {
+                let odd = &b.data[offset(b, 2 * q + 1, 0)..][..n];
+                row.iter_mut().zip(even.iter().zip(odd)).for_each(|(w, (&e, &o))| *w = pair(e, o));
+            } else {
+                row.iter_mut().zip(even).for_each(|(w, &e)| *w = pair(e, 0.0));
+            }
+        }
+    } else {
+        let mut block = [0u32; 256];
+        for j0 in (0..n).step_by(16) {
+            // block[c][qq]: column j0 + c's pair at rows 2(q0 + qq), + 1, i.e. row j0 + c of `bᵀ`
+            // (contiguous); the word rows are its transpose.
+            // SAFETY: AVX-512F (the caller's), `rows` holds 16 rows of `np ≥ j0 + 16` words.
+            unsafe {
+                pairs_along(&mut block, b.t(), j0, 2 * q0);
+                transpose16(&block, rows[j0..].as_mut_ptr(), np);
+            }
+        }
+    }
+}
+
+/// The left factor `A` (`m × k`) of a product whose columns are contiguous (the `xᵀ` of a weight
+/// gradient), rounded to bf16 and laid out tile by tile: for each block of 16 inner pairs, for
+/// each block of 16 rows, the tile's 16 rows of 16 words (word `(r, q)` the pair
+/// `(A[r][2q], A[r][2q + 1])`), zeros in the padding. Packed in one pass over `A`'s memory
+/// (blocks of inner pairs in parallel), where packing 32 rows at a time would read all of it
+/// with a stride per row.
+struct PackedLeft {
+    data: Vec<u32>,
+    /// Row blocks of 16 (rows rounded up to 32, over 16).
+    row_tiles: usize,
+}
+
+impl PackedLeft {
+    /// # Safety
+    /// The CPU must have AVX-512F.
+    unsafe fn new(a: MatRef<'_>, kp: usize) -> Self {
+        let row_tiles = a.rows.next_multiple_of(BLOCK) / 16;
+        let mut data = vec![0u32; kp / 2 * 16 * row_tiles];
+        data.par_chunks_mut(256 * row_tiles).enumerate().for_each(|(qb, tiles)| {
+            let mut block = [0u32; 256];
+            for (t, tile) in tiles.chunks_exact_mut(256).enumerate() {
+                // block[qq][c]: row 16t + c's pair at columns 32qb + 2qq, + 1, i.e. the pairs down
+                // `aᵀ` (contiguous rows); the tile is its transpose.
+                // SAFETY: AVX-512F (the caller's); `tile` holds 16 rows of 16 words.
+                unsafe {
+                    pairs_down(&mut block, a.t(), 32 * qb, 16 * t);
+                    transpose16(&block, tile.as_mut_ptr(), 16);
+                }
+            }
+        });
+        PackedLeft { data, row_tiles }
+    }
+}
+
+thread_local! {
+    /// One 32-row block of the left factor in bf16 pairs, reused by every product on this thread.
+    static LEFT: RefCell<Vec<u32>> = const { RefCell::new(Vec::new()) };
+}
+
+/// Where a block row's left tiles are: the tile of row half `h` (0, 1) and inner block `qb` starts
+/// `h · half_step + qb · q_step` words after `base`, its rows `stride` bytes apart.
+#[derive(Clone, Copy)]
+struct LeftTiles {
+    base: *const u32,
+    half_step: usize,
+    q_step: usize,
+    stride: isize,
+}
+
+/// `dst (m×n, row-major) = a·b` or, with `accumulate`, `dst += a·b`, on the calling thread, with
+/// `b` packed (module docs).
+///
+/// # Panics
+/// On inconsistent dimensions, or when [`bf16_matmul_available`] is false (a programming error:
+/// callers choose this path only when it is true).
+pub(crate) fn gemm_bf16_single_thread(dst: &mut [f32], a: MatRef<'_>, b: &PackedRight, accumulate: bool) {
+    let (m, n) = (a.rows, b.n);
+    check(dst, a, b);
+    if m == 0 || n == 0 {
+        return;
+    }
+    let half = b.kp / 2;
+    LEFT.with_borrow_mut(|left| {
+        left.clear();
+        left.resize(BLOCK * half, 0);
+        for i0 in (0..m).step_by(BLOCK) {
+            let rows = BLOCK.min(m - i0);
+            // SAFETY: AVX-512F is present where AMX is (checked).
+            unsafe { pack_left(left, a, i0, rows) };
+            let tiles = LeftTiles {
+                base: left.as_ptr(),
+                half_step: 16 * half,
+                q_step: 16,
+                stride: (half * 4) as isize,
+            };
+            // SAFETY: the tile state was granted (checked); `left` holds 32 rows of `kp / 2`
+            // words, which is all the kernel reads of it; `dst` rows `i0..i0 + rows` exist.
+            unsafe { block_row(&mut dst[i0 * n..(i0 + rows) * n], rows, tiles, b, accumulate) };
+        }
+    });
+}
+
+/// The dimensions agree and the tiles can run (panics otherwise: module docs).
+fn check(dst: &[f32], a: MatRef<'_>, b: &PackedRight) {
+    let (m, k, n) = (a.rows, a.cols, b.n);
+    assert_eq!(k, b.k, "gemm_bf16: inner dimensions {k} and {} differ", b.k);
+    assert_eq!(dst.len(), m * n, "gemm_bf16: destination holds {} values, expected {m}×{n}", dst.len());
+    assert!(bf16_matmul_available(), "gemm_bf16 called on a machine without AMX bf16");
+}
+
+/// [`gemm_bf16_single_thread`] with blocks of 32 output rows spread over the pool (the same bits:
+/// module docs). A left factor whose columns are contiguous is packed whole first
+/// ([`PackedLeft`]).
+pub(crate) fn gemm_bf16(dst: &mut [f32], a: MatRef<'_>, b: &PackedRight, accumulate: bool) {
+    let n = b.n;
+    if n == 0 || a.rows <= BLOCK {
+        return gemm_bf16_single_thread(dst, a, b, accumulate);
+    }
+    if a.row_stride == 1 && a.col_stride != 1 {
+        check(dst, a, b);
+        // SAFETY: AVX-512F is present where AMX is (checked).
+        let left = unsafe { PackedLeft::new(a, b.kp) };
+        let q_step = 256 * left.row_tiles;
+        let base = SendPtr(left.data.as_ptr());
+        dst.par_chunks_mut(BLOCK * n).enumerate().for_each(|(block, d)| {
+            // SAFETY: row tiles 2·block and 2·block + 1 exist (rows rounded up to 32); the tile
+            // state was granted (checked); `d` holds this block's rows.
+            unsafe {
+                let tiles =
+                    LeftTiles { base: base.get().add(2 * block * 256), half_step: 256, q_step, stride: 64 };
+                block_row(d, d.len() / n, tiles, b, accumulate);
+            }
+        });
+        return;
+    }
+    dst.par_chunks_mut(BLOCK * n).enumerate().for_each(|(block, d)| {
+        gemm_bf16_single_thread(d, a.row_range(block * BLOCK, d.len() / n), b, accumulate);
+    });
+}
+
+/// A pointer into data that outlives a parallel loop and is only read in it.
+#[derive(Clone, Copy)]
+struct SendPtr(*const u32);
+
+impl SendPtr {
+    /// The pointer (a method, so a closure captures the `Sync` wrapper, not its field).
+    fn get(self) -> *const u32 {
+        self.0
+    }
+}
+// SAFETY: the pointee is read-only for the loop's duration (it is borrowed immutably around it).
+unsafe impl Send for SendPtr {}
+// SAFETY: as above.
+unsafe impl Sync for SendPtr {}
+
+/// Rows `i0 .. i0 + rows` of `a` into `left`: 32 rows of `left.len() / 32` words, word `(r, q)` the
+/// pair `(a[i0 + r][2q], a[i0 + r][2q + 1])`, zeros in the padding. Row-major `a` is paired along
+/// its rows; other layouts 16 × 16 words at a time, transposed in registers.
+///
+/// # Safety
+/// The CPU must have AVX-512F.
+#[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx512f"))]
+unsafe fn pack_left(left: &mut [u32], a: MatRef<'_>, i0: usize, rows: usize) {
+    let (k, half) = (a.cols, left.len() / BLOCK);
+    let full_pairs = k / 2;
+    if a.col_stride == 1 {
+        for r in 0..rows {
+            let s = offset(a, i0 + r, 0);
+            let src = &a.data[s..s + k];
+            let dst = &mut left[r * half..(r + 1) * half];
+            pairs_of_row(&mut dst[..full_pairs], &src[..2 * full_pairs]);
+            if k % 2 == 1 {
+                dst[full_pairs] = pair(src[k - 1], 0.0);
+            }
+            dst[k.div_ceil(2)..].fill(0);
+        }
+        left[rows * half..].fill(0);
+    } else {
+        let mut block = [0u32; 256];
+        for r0 in (0..BLOCK).step_by(16) {
+            for q0 in (0..half).step_by(16) {
+                // SAFETY: AVX-512F (the caller's); rows r0..r0 + 16 of `left` hold `half ≥ q0 + 16`.
+                unsafe {
+                    pairs_down(&mut block, a.row_range(i0, rows).t(), 2 * q0, r0);
+                    transpose16(&block, left[r0 * half + q0..].as_mut_ptr(), half);
+                }
+            }
+        }
+    }
+}
+
+/// Writes the transpose of the 16 × 16 words `block` (row-major) to `dst`, rows `stride` words
+/// apart: `dst[r · stride + c] = block[c · 16 + r]`.
+///
+/// # Safety
+/// The CPU must have AVX-512F, and `dst` must be valid for 16 rows of 16 words at `stride`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn transpose16(block: &[u32; 256], dst: *mut u32, stride: usize) {
+    use std::arch::x86_64::*;
+    // SAFETY: the loads read inside `block`, the stores write the 16 rows the caller vouches for.
+    unsafe {
+        let mut r: [__m512i; 16] =
+            std::array::from_fn(|i| _mm512_loadu_si512(block.as_ptr().add(16 * i).cast()));
+        let mut t = [_mm512_setzero_si512(); 16];
+        // 2 × 2 blocks of words, then of word pairs (within 128-bit lanes), then of lanes.
+        for i in 0..8 {
+            t[2 * i] = _mm512_unpacklo_epi32(r[2 * i], r[2 * i + 1]);
+            t[2 * i + 1] = _mm512_unpackhi_epi32(r[2 * i], r[2 * i + 1]);
+        }
+        for i in 0..4 {
+            let b = 4 * i;
+            r[b] = _mm512_unpacklo_epi64(t[b], t[b + 2]);
+            r[b + 1] = _mm512_unpackhi_epi64(t[b], t[b + 2]);
+            r[b + 2] = _mm512_unpacklo_epi64(t[b + 1], t[b + 3]);
+            r[b + 3] = _mm512_unpackhi_epi64(t[b + 1], t[b + 3]);
+        }
+        for h in 0..2 {
+            let b = 8 * h;
+            for j in 0..4 {
+                t[b + j] = _mm512_shuffle_i32x4::<0x88>(r[b + j], r[b + j + 4]);
+                t[b + j + 4] = _mm512_shuffle_i32x4::<0xdd>(r[b + j], r[b + j + 4]);
+            }
+        }
+        for j in 0..8 {
+            r[j] = _mm512_shuffle_i32x4::<0x88>(t[j], t[j + 8]);
+            r[j + 8] = _mm512_shuffle_i32x4::<0xdd>(t[j], t[j + 8]);
+        }
+        for (i, row) in r.iter().enumerate() {
+            _mm512_storeu_si512(dst.add(i * stride).cast(), *row);
+        }
+    }
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+unsafe fn transpose16(block: &[u32; 256], dst: *mut u32, stride: usize) {
+    for r in 0..16 {
+        for c in 0..16 {
+            unsafe { *dst.add(r * stride + c) = block[c * 16 + r] };
+        }
+    }
+}
+
+/// The 64-byte tile configuration: palette 1, eight tiles of 16 rows × 64 bytes.
+#[repr(C, align(64))]
+struct TileConfig([u8; 64]);
+
+const TILE_CONFIG: TileConfig = {
+    let mut c = [0u8; 64];
+    c[0] = 1; // palette
+    let mut t = 0;
+    while t < 8 {
+        c[16 + 2 * t] = 64; // bytes per row (low byte of the u16 `colsb`)
+        c[48 + t] = 16; // rows
+        t += 1;
+    }
+    TileConfig(c)
+};
+
+/// One row of 32×32 output blocks: `dst` (`rows` × `b.n`) from the left tiles `a` and `b`.
+///
+/// # Safety
+/// The tile state must have been granted ([`bf16_matmul_available`]), `a` must address 2 row
+/// halves × `b.kp / 32` tiles of 16 rows of 64 bytes, and `dst` hold `rows × b.n` values.
+#[cfg(target_arch = "x86_64")]
+unsafe fn block_row(dst: &mut [f32], rows: usize, a: LeftTiles, b: &PackedRight, accumulate: bool) {
+    use std::arch::asm;
+    let (n, np, kp) = (b.n, b.np, b.kp);
+    debug_assert!(dst.len() == rows * n && b.data.len() == kp / 2 * np);
+    let mut out = [0f32; BLOCK * BLOCK];
+    let (b_stride, out_stride) = ((np * 4) as isize, (BLOCK * 4) as isize);
+    // SAFETY (for every asm block below): the configuration is a valid palette-1 layout; every
+    // tile load reads 16 rows of 64 bytes: a left tile the caller vouches for, or 16 word rows of
+    // `b` from row `qb · 16`, columns `j0 .. j0 + 32` (inside: `kp / 2` rows of `np ≥ j0 + 32`
+    // words); every store writes 16 rows of 64 bytes inside `out` or, for a whole block (32
+    // rows, 32 columns from `j0`), inside `dst`'s rows; the tiles are released before returning.
+    unsafe {
+        asm!("ldtilecfg [{}]", in(reg) TILE_CONFIG.0.as_ptr(), options(nostack, readonly));
+        for j0 in (0..n).step_by(BLOCK) {
+            asm!("tilezero tmm0", "tilezero tmm1", "tilezero tmm2", "tilezero tmm3", options(nostack, nomem));
+            let right = b.data.as_ptr().add(j0);
+            for qb in 0..kp / INNER {
+                let a0 = a.base.add(qb * a.q_step);
+                let b0 = right.add(qb * 16 * np);
+                asm!(
+                    "tileloadd tmm4, [{a0} + {sa}*1]",
+                    "tileloadd tmm5, [{a1} + {sa}*1]",
+                    "tileloadd tmm6, [{b0} + {sb}*1]",
+                    "tileloadd tmm7, [{b1} + {sb}*1]",
+                    "tdpbf16ps tmm0, tmm4, tmm6",
+                    "tdpbf16ps tmm1, tmm4, tmm7",
+                    "tdpbf16ps tmm2, tmm5, tmm6",
+                    "tdpbf16ps tmm3, tmm5, tmm7",
+                    a0 = in(reg) a0,
+                    a1 = in(reg) a0.add(a.half_step),
+                    b0 = in(reg) b0,
+                    b1 = in(reg) b0.add(16),
+                    sa = in(reg) a.stride,
+                    sb = in(reg) b_stride,
+                    options(nostack, readonly),
+                );
+            }
+            let cols = BLOCK.min(n - j0);
+            // A whole block that replaces its destination is stored there directly.
+            let direct = !accumulate && rows == BLOCK && cols == BLOCK;
+            let (o, s) = if direct {
+                (dst.as_mut_ptr().add(j0), (n * 4) as isize)
+            } else {
+                (out.as_mut_ptr(), out_stride)
+            };
+            let row_16 = if direct { 16 * n } else { 16 * BLOCK };
+            asm!(
+                "tilestored [{o0} + {s}*1], tmm0",
+                "tilestored [{o1} + {s}*1], tmm1",
+                "tilestored [{o2} + {s}*1], tmm2",
+                "tilestored [{o3} + {s}*1], tmm3",
+                o0 = in(reg) o,
+                o1 = in(reg) o.add(16),
+                o2 = in(reg) o.add(row_16),
+                o3 = in(reg) o.add(row_16 + 16),
+                s = in(reg) s,
+                options(nostack),
+            );
+            if direct {
+                continue;
+            }
+            for r in 0..rows {
+                let d = &mut dst[r * n + j0..r * n + j0 + cols];
+                let src = &out[r * BLOCK..r * BLOCK + cols];
+                if accumulate {
+                    d.iter_mut().zip(src).for_each(|(d, &s)| *d += s);
+                } else {
+                    d.copy_from_slice(src);
+                }
+            }
+        }
+        asm!("tilerelease", options(nostack, nomem));
+    }
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+unsafe fn block_row(_: &mut [f32], _: usize, _: LeftTiles, _: &PackedRight, _: bool) {
+    unreachable!("bf16_matmul_available is false off x86-64")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::kernels::gemm;
+    use crate::shape::Shape;
+
+    fn lcg(seed: u64, n: usize, scale: f32) -> Vec<f32> {
+        let mut s = seed;
+        (0..n)
+            .map(|_| {
+                s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                ((s >> 40) as f32 / (1u64 << 24) as f32 - 0.5) * scale
+            })
+            .collect()
+    }
+
+    #[test]
+    fn rounding_is_to_nearest_even_and_keeps_bf16_values() {
+        assert_eq!(to_bf16(1.0), 0x3f80);
+        assert_eq!(to_bf16(-2.5), 0xc020);
+        // 1 + 2^-8 lies halfway between 1 and 1 + 2^-7: ties go to the even (1.0).
+        assert_eq!(to_bf16(f32::from_bits(0x3f80_8000)), 0x3f80);
+        // 1 + 3·2^-8 lies halfway between 1 + 2^-7 (odd) and 1 + 2^-6: up to the even.
+        assert_eq!(to_bf16(f32::from_bits(0x3f81_8000)), 0x3f82);
+        assert_eq!(to_bf16(f32::from_bits(0x3f80_8001)), 0x3f81);
+        assert!(f32::from_bits((to_bf16(f32::NAN) as u32) << 16).is_nan());
+        assert_eq!(to_bf16(f32::INFINITY), 0x7f80);
+        assert_eq!(pair(1.0, -2.5), 0xc020_3f80);
+    }
+
+    #[test]
+    fn a_block_of_words_is_transposed() {
+        if !bf16_matmul_available() {
+            return;
+        }
+        let block: [u32; 256] = std::array::from_fn(|i| i as u32);
+        let mut out = vec![0u32; 16 * 20];
+        // SAFETY: AVX-512F is present where AMX is; `out` holds 16 rows of 20 words.
+        unsafe { transpose16(&block, out.as_mut_ptr(), 20) };
+        for r in 0..16 {
+            for c in 0..16 {
+                assert_eq!(out[r * 20 + c], (c * 16 + r) as u32, "({r}, {c})");
+            }
+            assert!(out[r * 20 + 16..r * 20 + 20].iter().all(|&w| w == 0));
+        }
+    }
+
+    /// Products of small integers are exact in bf16 and in f32: the tiles must give the f32
+    /// product bit for bit, whatever the shape's padding (odd sizes), the transposes, and with
+    /// accumulation.
+    #[test]
+    fn exact_inputs_give_the_f32_product_bit_for_bit() {
+        if !bf16_matmul_available() {
+            eprintln!("no AMX bf16 on this machine: the tile kernel is not exercised");
+            return;
+        }
+        for &(m, k, n) in
+            &[(1, 16, 16), (33, 47, 17), (64, 64, 64), (64, 200, 48), (100, 300, 70), (5, 1000, 40)]
+        {
+            let ints = |seed, len| lcg(seed, len, 16.0).into_iter().map(f32::round).collect::<Vec<f32>>();
+            let (a, b, c0) = (ints(1, m * k), ints(2, k * n), ints(3, m * n));
+            for (ta, tb) in [(false, false), (true, false), (false, true)] {
+                let (sa, sb) = (
+                    if ta { Shape::new(k, m) } else { Shape::new(m, k) },
+                    if tb { Shape::new(n, k) } else { Shape::new(k, n) },
+                );
+                let av = MatRef::new(&a, sa).maybe_t(ta);
+                let bv = MatRef::new(&b, sb).maybe_t(tb);
+                for accumulate in [false, true] {
+                    let (mut want, mut got) = (c0.clone(), c0.clone());
+                    gemm(&mut want, av, bv, accumulate);
+                    gemm_bf16(&mut got, av, &PackedRight::new(bv), accumulate);
+                    assert_eq!(got, want, "{m}×{k}×{n} ta {ta} tb {tb} accumulate {accumulate}");
+                }
+            }
+        }
+    }
+
+    /// General inputs: within bf16's rounding of the factors (relative 2^-8 each), and the same
+    /// bits computed whole, in row blocks, and on one thread or many.
+    #[test]
+    fn general_inputs_are_close_and_do_not_depend_on_the_split() {
+        if !bf16_matmul_available() {
+            eprintln!("no AMX bf16 on this machine: the tile kernel is not exercised");
+            return;
+        }
+        let (m, k, n) = (300, 256, 96);
+        let (a, b) = (lcg(4, m * k, 2.0), lcg(5, k * n, 2.0));
+        let (av, bv) = (MatRef::new(&a, Shape::new(m, k)), MatRef::new(&b, Shape::new(k, n)));
+        let mut want = vec![0.0; m * n];
+        gemm(&mut want, av, bv, false);
+        let packed = PackedRight::new(bv);
+        let mut whole = vec![0.0; m * n];
+        gemm_bf16(&mut whole, av, &packed, false);
+        // |error| ≤ Σ |a||b| · 2 · 2^-8 (each factor's rounding), with room for the f32 sums.
+        for i in 0..m {
+            for j in 0..n {
+                let bound: f32 =
+                    (0..k).map(|kk| (a[i * k + kk] * b[kk * n + j]).abs()).sum::<f32>() * 2.0 / 256.0;
+                let (w, g) = (want[i * n + j], whole[i * n + j]);
+                assert!((w - g).abs() <= bound * 1.01 + 1e-6, "({i},{j}): {g} vs {w}, bound {bound}");
+            }
+        }
+        let mut blocks = vec![0.0; m * n];
+        for start in (0..m).step_by(70) {
+            let rows = 70.min(m - start);
+            gemm_bf16_single_thread(
+                &mut blocks[start * n..(start + rows) * n],
+                av.row_range(start, rows),
+                &packed,
+                false,
+            );
+        }
+        assert_eq!(blocks, whole);
+        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+        let mut single = vec![0.0; m * n];
+        one.install(|| gemm_bf16(&mut single, av, &packed, false));
+        assert_eq!(single, whole);
+    }
+}
