@@ -974,7 +974,8 @@ mod tests {
         assert_eq!(from_str("c.toml", MINIMAL).unwrap().config.training.matmul, MatmulPrecision::F32);
         let c = from_str("c.toml", &format!("{MINIMAL}[training]\nmatmul = \"bf16\"\n")).unwrap();
         assert_eq!(c.config.training.matmul, MatmulPrecision::Bf16);
-        let e = from_str("c.toml", &format!("{MINIMAL}[training]\nmatmul = \"f16\"\n")).unwrap_err().to_string();
+        let e =
+            from_str("c.toml", &format!("{MINIMAL}[training]\nmatmul = \"f16\"\n")).unwrap_err().to_string();
         assert!(e.contains("training.matmul") && e.contains("bf16"), "{e}");
     }
 
