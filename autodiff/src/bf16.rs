@@ -27,7 +27,9 @@
 //! - **Tiles**: one 32×32 output block at a time in four accumulator tiles (`tmm0..3`), two
 //!   16×32 tiles of the left factor (`tmm4, 5`) and two 32×16 tiles of the right factor in VNNI
 //!   pairs (`tmm6, 7`). The right factor is packed once per product ([`PackedRight`]), the left
-//!   one 32 rows at a time into a per-thread buffer.
+//!   one 32 rows at a time into a per-thread buffer, or, when its columns are contiguous (the
+//!   `xᵀ` of a weight gradient), whole in one pass ([`PackedLeft`]). Only the packing differs
+//!   between these paths, never the order of a sum.
 //!
 //! Permission: Linux gives a process the AMX state only after it asks
 //! (`arch_prctl(ARCH_REQ_XCOMP_PERM, XFEATURE_XTILEDATA)`); [`bf16_matmul_available`] asks once,
