@@ -290,10 +290,12 @@ fn runs(row: &[u64], w: u32) -> Vec<(u32, u32)> {
     out
 }
 
-/// The first `x' ≥ x` (below `w`) whose bit is `set`, or `w`.
+/// The first `x' ≥ x` (below `w`) whose bit is `set`, or `w`. Reads no word past the one holding
+/// bit `w - 1`, so a test of a short span costs a word or two, not the rest of the row.
 fn next(row: &[u64], x: u32, w: u32, set: bool) -> u32 {
     let mut i = x as usize / 64;
-    if i >= row.len() {
+    let end = row.len().min((w as usize).div_ceil(64));
+    if i >= end {
         return w;
     }
     let mut word = if set { row[i] } else { !row[i] } & (!0u64 << (x % 64));
@@ -302,7 +304,7 @@ fn next(row: &[u64], x: u32, w: u32, set: bool) -> u32 {
             return (i as u32 * 64 + word.trailing_zeros()).min(w);
         }
         i += 1;
-        if i >= row.len() {
+        if i >= end {
             return w;
         }
         word = if set { row[i] } else { !row[i] };
@@ -429,7 +431,7 @@ impl Occupancy {
                     let r = (last + i) % fp.h as usize;
                     let row = self.row(y + r as u32);
                     for &(a, b) in &fp.rows[r] {
-                        let s = next(row, x + a, self.side, true);
+                        let s = next(row, x + a, x + b + 1, true);
                         if s <= x + b {
                             // Every x' with x' + a in the occupied run from `s` collides too.
                             x = next(row, s, self.side, false) - a;
@@ -525,6 +527,28 @@ mod tests {
             points,
             tris: vec![[0, 1, 2], [0, 2, 3]],
             outline: None,
+        }
+    }
+
+    /// `next` against a bit-by-bit search: the first `x' ≥ x` below `w` whose bit is `set`, else
+    /// `w`, for limits inside a word, on a word boundary and at the row's end.
+    #[test]
+    fn the_next_set_or_clear_bit_stops_at_its_limit() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let row: Vec<u64> =
+            (0..4).map(|i| if i == 1 { 0 } else { rng.random::<u64>() & rng.random::<u64>() }).collect();
+        let bit = |x: u32| row[x as usize / 64] >> (x % 64) & 1 == 1;
+        for set in [true, false] {
+            for x in 0..256 {
+                for w in [x, x + 1, x + 5, x + 63, x + 64, x + 130, 256]
+                    .into_iter()
+                    .filter(|&w| w >= x && w <= 256)
+                {
+                    let want = (x..w).find(|&i| bit(i) == set).unwrap_or(w);
+                    assert_eq!(next(&row, x, w, set), want, "x {x} w {w} set {set}");
+                }
+            }
         }
     }
 
