@@ -164,9 +164,9 @@ pub struct TrainingConfig {
     pub stop_when_settled: Option<f32>,
     /// Arithmetic of the networks' products while training: `"f32"` (the default) or `"bf16"`,
     /// factors rounded to bfloat16 and accumulated in f32 on the AMX tiles of CPUs that have them
-    /// (Intel Xeon since Sapphire Rapids), f32 elsewhere (the run's log says which ran). Faster;
-    /// the atlas differs from an f32 run's as another seed's would (BENCHMARKS.md). The bake
-    /// always evaluates the networks in f32. Not in the paper.
+    /// (Intel Xeon since Sapphire Rapids), f32 elsewhere (the run says which when it starts).
+    /// Faster; the atlas differs from an f32 run's as another seed's would (BENCHMARKS.md). The
+    /// bake always evaluates the networks in f32. Not in the paper.
     pub matmul: MatmulPrecision,
     /// Finite-difference step of the distortion losses, in the model frame (the paper: 1e-2).
     pub epsilon: f32,
