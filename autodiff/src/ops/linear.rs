@@ -273,6 +273,11 @@ mod tests {
     /// their bits do not depend on the thread count.
     #[test]
     fn a_bf16_layer_is_close_to_f32_and_deterministic() {
+        if !crate::bf16_matmul_available() {
+            // bf16 falls back to f32 here, which the last assertion below would refuse.
+            assert!(gradients_of(true, 1, MatmulPrecision::Bf16, &filled) == gradients(true, 1));
+            return;
+        }
         let want = gradients(true, 1);
         let got = gradients_of(true, 1, MatmulPrecision::Bf16, &filled);
         assert!(gradients_of(true, 2, MatmulPrecision::Bf16, &filled) == got, "two threads changed the bits");
