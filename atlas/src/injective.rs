@@ -2005,7 +2005,12 @@ impl Patch {
     fn halves(&self) -> [Vec<u32>; 2] {
         let adj = self.face_adjacency();
         let (a, b, _) = far_apart(&adj);
-        let (_, owner) = breadth_first(&adj, &[a, b]);
+        self.halves_from(&adj, a, b)
+    }
+
+    /// [`Patch::halves`] for the adjacency `adj` it builds and its far-apart faces `a`, `b`.
+    fn halves_from(&self, adj: &[Vec<u32>], a: u32, b: u32) -> [Vec<u32>; 2] {
+        let (_, owner) = breadth_first(adj, &[a, b]);
         let mut halves = [Vec::new(), Vec::new()];
         for (t, &o) in owner.iter().enumerate() {
             // Faces no edge reaches (only possible through collapsed faces) go with the first part.
@@ -2032,7 +2037,7 @@ impl Patch {
     /// every such seam is seen by the renders.
     fn cut_in_two(&self, ctx: &Ctx) -> Vec<Vec<u32>> {
         let adj = self.face_adjacency();
-        let (_, b, from_a) = far_apart(&adj);
+        let (a, b, from_a) = far_apart(&adj);
         let from_b = breadth_first(&adj, &[b]).0;
         // The end each face is bound to (`false` the first), `None` in the band between.
         let end: Vec<Option<bool>> = from_a
@@ -2081,7 +2086,7 @@ impl Patch {
         let label: Vec<bool> =
             end.iter().enumerate().map(|(t, e)| e.unwrap_or_else(|| in_band[node[t] as usize])).collect();
         let parts = self.components(&label);
-        if parts.len() > 1 { parts } else { self.halves().to_vec() }
+        if parts.len() > 1 { parts } else { self.halves_from(&adj, a, b).to_vec() }
     }
 
     /// The edges that exactly two of `faces` (patch face indices and their corners) share, as

@@ -139,12 +139,6 @@ fn get(a: MatRef<'_>, r: usize, c: usize) -> f32 {
     if r < a.rows && c < a.cols { a.at(r, c) } else { 0.0 }
 }
 
-/// Offset of `a`'s element `(r, c)` in its data.
-#[inline(always)]
-fn offset(a: MatRef<'_>, r: usize, c: usize) -> usize {
-    (r as isize * a.row_stride + c as isize * a.col_stride) as usize
-}
-
 /// Fills the 16 × 16 words `block` with `m`'s pairs down its columns: `block[q · 16 + c]` the pair
 /// `(m[i0 + 2q][c0 + c], m[i0 + 2q + 1][c0 + c])`, 0 outside `m`. Rows of `m` whose 16 values are
 /// contiguous are read as runs.
@@ -152,8 +146,8 @@ fn offset(a: MatRef<'_>, r: usize, c: usize) -> usize {
 unsafe fn pairs_down(block: &mut [u32; 256], m: MatRef<'_>, i0: usize, c0: usize) {
     if m.col_stride == 1 && i0 + 32 <= m.rows && c0 + 16 <= m.cols {
         for (q, words) in block.chunks_exact_mut(16).enumerate() {
-            let s0 = offset(m, i0 + 2 * q, c0);
-            let s1 = offset(m, i0 + 2 * q + 1, c0);
+            let s0 = m.offset(i0 + 2 * q, c0);
+            let s1 = m.offset(i0 + 2 * q + 1, c0);
             let (even, odd) = (&m.data[s0..s0 + 16], &m.data[s1..s1 + 16]);
             words.iter_mut().zip(even.iter().zip(odd)).for_each(|(w, (&e, &o))| *w = pair(e, o));
         }
@@ -192,7 +186,7 @@ fn pairs_of_row(words: &mut [u32], src: &[f32]) {
 unsafe fn pairs_along(block: &mut [u32; 256], m: MatRef<'_>, r0: usize, k0: usize) {
     if m.col_stride == 1 && r0 + 16 <= m.rows && k0 + 32 <= m.cols {
         for (r, words) in block.chunks_exact_mut(16).enumerate() {
-            let s = offset(m, r0 + r, k0);
+            let s = m.offset(r0 + r, k0);
             pairs_of_row(words, &m.data[s..s + 32]);
         }
     } else {
@@ -256,9 +250,9 @@ unsafe fn pack_right_rows(rows: &mut [u32], b: MatRef<'_>, q0: usize, np: usize)
             if 2 * q >= k {
                 break;
             }
-            let even = &b.data[offset(b, 2 * q, 0)..][..n];
+            let even = &b.data[b.offset(2 * q, 0)..][..n];
             if 2 * q + 1 < k {
-                let odd = &b.data[offset(b, 2 * q + 1, 0)..][..n];
+                let odd = &b.data[b.offset(2 * q + 1, 0)..][..n];
                 row.iter_mut().zip(even.iter().zip(odd)).for_each(|(w, (&e, &o))| *w = pair(e, o));
             } else {
                 row.iter_mut().zip(even).for_each(|(w, &e)| *w = pair(e, 0.0));
@@ -425,7 +419,7 @@ unsafe fn pack_left(left: &mut [u32], a: MatRef<'_>, i0: usize, rows: usize) {
     let full_pairs = k / 2;
     if a.col_stride == 1 {
         for r in 0..rows {
-            let s = offset(a, i0 + r, 0);
+            let s = a.offset(i0 + r, 0);
             let src = &a.data[s..s + k];
             let dst = &mut left[r * half..(r + 1) * half];
             pairs_of_row(&mut dst[..full_pairs], &src[..2 * full_pairs]);

@@ -61,10 +61,16 @@ impl<'a> MatRef<'a> {
         MatRef { data: &self.data[offset..], rows: count, ..self }
     }
 
+    /// Where the element at row `r`, column `c` is in `data`.
+    #[inline(always)]
+    pub fn offset(&self, r: usize, c: usize) -> usize {
+        (r as isize * self.row_stride + c as isize * self.col_stride) as usize
+    }
+
     /// The element at row `r`, column `c`.
     #[inline(always)]
     pub fn at(&self, r: usize, c: usize) -> f32 {
-        self.data[(r as isize * self.row_stride + c as isize * self.col_stride) as usize]
+        self.data[self.offset(r, c)]
     }
 
     /// The view, transposed when `transpose` is set.
