@@ -43,6 +43,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::kernels::MatRef;
+use crate::lines::LineBuf;
 
 /// The arithmetic of the fused linear layers' products.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -198,12 +199,20 @@ unsafe fn pairs_along(block: &mut [u32; 256], m: MatRef<'_>, r0: usize, k0: usiz
     }
 }
 
+/// Packed bf16 pairs on whole cache lines, so that every tile row the kernel loads starts on a
+/// line: the layouts keep rows and tiles at multiples of 16 words ([`crate::lines`]).
+type Words = LineBuf<u32>;
+
+/// A 32 × 32 output block on whole cache lines (tile stores, [`crate::lines`]).
+#[repr(C, align(64))]
+struct OutBlock([f32; BLOCK * BLOCK]);
+
 /// The right factor `B` (`k × n`) of a product, rounded to bf16 and laid out for the tiles: `kp / 2`
 /// rows of `np` words, word `(q, j)` the pair `(B[2q][j], B[2q+1][j])` (the VNNI layout
 /// `TDPBF16PS` reads), `kp` = `k` rounded up to 32, `np` = `n` rounded up to 32, zeros in the
 /// padding. A tile of 16 columns is 16 word rows `np` words apart.
 pub(crate) struct PackedRight {
-    data: Vec<u32>,
+    data: Words,
     k: usize,
     n: usize,
     /// Inner dimension rounded up to [`INNER`].
@@ -224,7 +233,7 @@ impl PackedRight {
         assert!(bf16_matmul_available(), "PackedRight on a machine without AMX bf16");
         let (k, n) = (b.rows, b.cols);
         let (kp, np) = (k.next_multiple_of(INNER), n.next_multiple_of(BLOCK));
-        let mut data = vec![0u32; kp / 2 * np];
+        let mut data = Words::zeroed(kp / 2 * np);
         let chunk = 16 * np; // 16 word rows: one tile's height
         // SAFETY: AVX-512F is present where AMX is (asserted above).
         let fill = |(c, rows): (usize, &mut [u32])| unsafe { pack_right_rows(rows, b, 16 * c, np) };
@@ -279,7 +288,7 @@ unsafe fn pack_right_rows(rows: &mut [u32], b: MatRef<'_>, q0: usize, np: usize)
 /// (blocks of inner pairs in parallel), where packing 32 rows at a time would read all of it
 /// with a stride per row.
 struct PackedLeft {
-    data: Vec<u32>,
+    data: Words,
     /// Row blocks of 16 (rows rounded up to 32, over 16).
     row_tiles: usize,
 }
@@ -289,7 +298,7 @@ impl PackedLeft {
     /// The CPU must have AVX-512F.
     unsafe fn new(a: MatRef<'_>, kp: usize) -> Self {
         let row_tiles = a.rows.next_multiple_of(BLOCK) / 16;
-        let mut data = vec![0u32; kp / 2 * 16 * row_tiles];
+        let mut data = Words::zeroed(kp / 2 * 16 * row_tiles);
         data.par_chunks_mut(256 * row_tiles).enumerate().for_each(|(qb, tiles)| {
             let mut block = [0u32; 256];
             for (t, tile) in tiles.chunks_exact_mut(256).enumerate() {
@@ -308,7 +317,7 @@ impl PackedLeft {
 
 thread_local! {
     /// One 32-row block of the left factor in bf16 pairs, reused by every product on this thread.
-    static LEFT: RefCell<Vec<u32>> = const { RefCell::new(Vec::new()) };
+    static LEFT: RefCell<Words> = const { RefCell::new(Words::new()) };
 }
 
 /// Where a block row's left tiles are: the tile of row half `h` (0, 1) and inner block `qb` starts
@@ -335,8 +344,7 @@ pub(crate) fn gemm_bf16_single_thread(dst: &mut [f32], a: MatRef<'_>, b: &Packed
     }
     let half = b.kp / 2;
     LEFT.with_borrow_mut(|left| {
-        left.clear();
-        left.resize(BLOCK * half, 0);
+        left.set_zeroed(BLOCK * half);
         for i0 in (0..m).step_by(BLOCK) {
             let rows = BLOCK.min(m - i0);
             // SAFETY: AVX-512F is present where AMX is (checked).
@@ -521,7 +529,8 @@ unsafe fn block_row(dst: &mut [f32], rows: usize, a: LeftTiles, b: &PackedRight,
     use std::arch::asm;
     let (n, np, kp) = (b.n, b.np, b.kp);
     debug_assert!(dst.len() == rows * n && b.data.len() == kp / 2 * np);
-    let mut out = [0f32; BLOCK * BLOCK];
+    let mut out = OutBlock([0f32; BLOCK * BLOCK]);
+    let out = &mut out.0;
     let (b_stride, out_stride) = ((np * 4) as isize, (BLOCK * 4) as isize);
     // SAFETY (for every asm block below): the configuration is a valid palette-1 layout; every
     // tile load reads 16 rows of 64 bytes: a left tile the caller vouches for, or 16 word rows of

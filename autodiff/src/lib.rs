@@ -26,6 +26,7 @@
 mod bf16;
 pub mod gradcheck;
 mod kernels;
+mod lines;
 pub mod nn;
 mod ops;
 pub mod optim;

@@ -9,10 +9,13 @@
 
 use std::collections::BTreeMap;
 
-/// A pooled buffer: a fully initialised `Vec<f32>` of which the first `len` elements are in use.
+use crate::lines::LineBuf;
+
+/// A pooled buffer: fully initialised floats, of which the first `len` are in use, starting on a
+/// cache line ([`crate::lines`]: the AMX tile kernel stores its products' rows into them).
 #[derive(Debug, Default)]
 pub struct Buf {
-    data: Vec<f32>,
+    data: LineBuf<f32>,
     len: usize,
 }
 
@@ -46,7 +49,7 @@ impl Buf {
 /// request and wastes at most half of itself; otherwise it allocates exactly.
 #[derive(Debug, Default)]
 pub struct Pool {
-    free: BTreeMap<usize, Vec<Vec<f32>>>,
+    free: BTreeMap<usize, Vec<LineBuf<f32>>>,
     allocations: u64,
     pooled_floats: usize,
 }
@@ -71,7 +74,7 @@ impl Pool {
             }
             None => {
                 self.allocations += 1;
-                Buf { data: vec![0.0; len], len }
+                Buf { data: LineBuf::zeroed(len), len }
             }
         }
     }
