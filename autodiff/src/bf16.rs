@@ -233,7 +233,7 @@ impl PackedRight {
         assert!(bf16_matmul_available(), "PackedRight on a machine without AMX bf16");
         let (k, n) = (b.rows, b.cols);
         let (kp, np) = (k.next_multiple_of(INNER), n.next_multiple_of(BLOCK));
-        let mut data = Words::zeroed(kp / 2 * np);
+        let mut data = spare_words(kp / 2 * np);
         let chunk = 16 * np; // 16 word rows: one tile's height
         // SAFETY: AVX-512F is present where AMX is (asserted above).
         let fill = |(c, rows): (usize, &mut [u32])| unsafe { pack_right_rows(rows, b, 16 * c, np) };
@@ -243,6 +243,12 @@ impl PackedRight {
             data.chunks_mut(chunk).enumerate().for_each(fill);
         }
         PackedRight { data, k, n, kp, np }
+    }
+}
+
+impl Drop for PackedRight {
+    fn drop(&mut self) {
+        give_back(std::mem::take(&mut self.data));
     }
 }
 
@@ -298,7 +304,7 @@ impl PackedLeft {
     /// The CPU must have AVX-512F.
     unsafe fn new(a: MatRef<'_>, kp: usize) -> Self {
         let row_tiles = a.rows.next_multiple_of(BLOCK) / 16;
-        let mut data = Words::zeroed(kp / 2 * 16 * row_tiles);
+        let mut data = spare_words(kp / 2 * 16 * row_tiles);
         data.par_chunks_mut(256 * row_tiles).enumerate().for_each(|(qb, tiles)| {
             let mut block = [0u32; 256];
             for (t, tile) in tiles.chunks_exact_mut(256).enumerate() {
@@ -313,6 +319,49 @@ impl PackedLeft {
         });
         PackedLeft { data, row_tiles }
     }
+}
+
+impl Drop for PackedLeft {
+    fn drop(&mut self) {
+        give_back(std::mem::take(&mut self.data));
+    }
+}
+
+/// Packed factors' buffers kept for the next products on this thread, at most this many.
+const SPARES: usize = 4;
+
+thread_local! {
+    /// Buffers of dropped packed factors ([`spare_words`]).
+    static SPARE: RefCell<Vec<Words>> = const { RefCell::new(Vec::new()) };
+}
+
+/// `len` zero words for a packed factor, in a buffer a dropped one left on this thread when one
+/// holds them. Why: every product packs its factors anew, and fresh multi-megabyte buffers
+/// came from the kernel as zeroed pages each time (page faults and clearing: ~3% of the
+/// paper's bf16 step).
+fn spare_words(len: usize) -> Words {
+    let mut w = SPARE
+        .with_borrow_mut(|spare| {
+            let fits = spare.iter().position(|w| w.capacity() >= len);
+            fits.or(spare.len().checked_sub(1)).map(|i| spare.swap_remove(i))
+        })
+        .unwrap_or_default();
+    w.set_zeroed(len);
+    w
+}
+
+/// Keeps `w` for [`spare_words`] (the largest [`SPARES`] of them).
+fn give_back(w: Words) {
+    if w.capacity() == 0 {
+        return;
+    }
+    SPARE.with_borrow_mut(|spare| {
+        spare.push(w);
+        if spare.len() > SPARES {
+            let smallest = (0..spare.len()).min_by_key(|&i| spare[i].capacity()).expect("not empty");
+            spare.swap_remove(smallest);
+        }
+    });
 }
 
 thread_local! {

@@ -46,6 +46,13 @@ impl<T: Copy + Default> LineBuf<T> {
     }
 }
 
+impl<T: Copy> LineBuf<T> {
+    /// How many elements the buffer holds without reallocating.
+    pub(crate) fn capacity(&self) -> usize {
+        16 * self.lines.capacity()
+    }
+}
+
 impl<T: Copy + Default> Default for LineBuf<T> {
     fn default() -> Self {
         LineBuf::new()
