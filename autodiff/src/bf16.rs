@@ -342,8 +342,11 @@ thread_local! {
 fn spare_words(len: usize) -> Words {
     let mut w = SPARE
         .with_borrow_mut(|spare| {
-            let fits = spare.iter().position(|w| w.capacity() >= len);
-            fits.or(spare.len().checked_sub(1)).map(|i| spare.swap_remove(i))
+            // The smallest that holds `len`, else the largest (grown): a large buffer taken for
+            // a small factor would leave the next large one to fresh pages.
+            let by_capacity = |&i: &usize| spare[i].capacity();
+            let fits = (0..spare.len()).filter(|&i| spare[i].capacity() >= len).min_by_key(by_capacity);
+            fits.or_else(|| (0..spare.len()).max_by_key(by_capacity)).map(|i| spare.swap_remove(i))
         })
         .unwrap_or_default();
     w.set_zeroed(len);
