@@ -489,6 +489,9 @@ fn shear(metric: &[[f64; 3]], rot: [f64; 2]) -> f64 {
     sum / metric.len() as f64
 }
 
+/// Faces from which [`least_shear_rotation`] evaluates its grid's angles in parallel.
+const PAR_SHEAR_FACES: usize = 2000;
+
 /// The turn that makes the island's texture axes shear least on the surface: the angle in
 /// `[0°, 90°)` minimising [`shear`] (0.5° grid, then golden-section search within the best grid
 /// cell), or `fallback` unless that is lower than `fallback`'s by more than [`TURN_SHEAR`].
@@ -505,9 +508,16 @@ fn least_shear_rotation(metric: &[[f64; 3]], fallback: [f64; 2]) -> [f64; 2] {
     };
     let f = |deg: f64| shear(metric, at(deg));
     let step = 0.5;
-    let (mut best, mut best_f) = (0.0, f(0.0));
-    for k in 1..180 {
-        let v = f(k as f64 * step);
+    // The grid's angles in parallel (each sum over the faces is still taken in order, so the
+    // values and the choice, the first lowest, are those of a sequential scan): one large
+    // island's turn was the tail of the islands' parallel loop.
+    let grid: Vec<f64> = if metric.len() >= PAR_SHEAR_FACES {
+        (0..180).into_par_iter().map(|k| f(k as f64 * step)).collect()
+    } else {
+        (0..180).map(|k| f(k as f64 * step)).collect()
+    };
+    let (mut best, mut best_f) = (0.0, grid[0]);
+    for (k, &v) in grid.iter().enumerate().skip(1) {
         if v < best_f {
             (best, best_f) = (k as f64 * step, v);
         }

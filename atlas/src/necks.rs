@@ -33,11 +33,12 @@
 //!   3-D length, `A` the mesh's 3-D area: a seam must buy packing in proportion to its length
 //!   relative to the surface's size, as the renders see a seam by its length). At one texel
 //!   density the efficiency grows with the square of the common scale, so the trial is one
-//!   packing attempt ([`packs_at_scale`]) at `√(1 + g)` times the current scale, not a search.
-//!   An island's candidates are tried in order and the first that packs is kept; how much
-//!   tighter it packs is then measured to [`PROBE_STEP`] by further attempts (*probes*: steps
-//!   up that double until one fails, then bisection), and the scale proven last becomes the
-//!   current one. The pass ends after [`NeckOptions::max_trials`] trials,
+//!   packing attempt ([`packs_at_scale`](crate::islands::packs_at_scale)) at `√(1 + g)` times
+//!   the current scale, not a search. An island's candidates are tried in order and the first
+//!   that packs is kept; how much tighter it packs is then measured to [`PROBE_STEP`] by
+//!   further attempts (*probes*: steps up that double until one fails, then bisection, asking
+//!   the islands the kept trial prepared), and the scale proven last becomes the current one.
+//!   The pass ends after [`NeckOptions::max_trials`] trials,
 //!   after [`NeckOptions::max_failures`] islands in a row without a kept cut (on a
 //!   marching-cubes mesh of thousands of islands no single cut moves the packing), or when
 //!   every island has been tried, or once the packing attempts (trials and probes) times the
@@ -73,8 +74,7 @@ use crate::error::AtlasError;
 use crate::geom::to_dvec3;
 use crate::injective::{path_back, shortest_paths};
 use crate::islands::{
-    IslandPacking, SHAPES_UP_TO, ScaleTest, convex_hull, min_area_rotation, pack_islands, packs_at_scale,
-    rotated,
+    IslandPacking, SHAPES_UP_TO, ScaleTest, convex_hull, min_area_rotation, pack_islands, rotated,
 };
 use crate::metrics::{EvalOptions, unpacked_editability};
 use crate::partuv::face_areas_3d;
@@ -233,17 +233,18 @@ pub fn cut_necks(mesh: &TriMesh, opts: &NeckOptions) -> Result<Necked, AtlasErro
             let target = scale * rise.sqrt();
             let trial = apply_cut(&current, uv, &faces, &side);
             report.trials += 1;
-            if packs_at_scale(&trial, &opts.packing, target)? {
-                kept = Some((trial, seam, rise));
+            let test = ScaleTest::new(&trial, &opts.packing)?;
+            if test.packs_at(target) {
+                kept = Some((trial, test, seam, rise));
                 break;
             }
         }
-        let Some((trial, seam, rise)) = kept else {
+        let Some((trial, probe, seam, rise)) = kept else {
             failures += 1;
             continue;
         };
-        // The cut usually packs tighter than it had to: find how much, to `PROBE_STEP`.
-        let probe = ScaleTest::new(&trial, &opts.packing)?;
+        // The cut usually packs tighter than it had to: find how much, to `PROBE_STEP`, asking
+        // the islands the trial prepared.
         let (mut lo, mut step) = (rise, PROBE_STEP);
         let mut hi = None;
         while hi.is_none_or(|h: f64| h / lo > 1.0 + PROBE_STEP) && affordable(&report) {
