@@ -246,6 +246,44 @@ impl PackedRight {
     }
 }
 
+impl PackedRight {
+    /// A `k × n` factor of zeros, whose pairs the caller packs block by block
+    /// ([`PackedRight::row_blocks`], [`pack_right_block`]) where it computes the rows.
+    ///
+    /// # Panics
+    /// As [`PackedRight::new`].
+    pub(crate) fn zeroed(k: usize, n: usize) -> Self {
+        assert!(bf16_matmul_available(), "PackedRight on a machine without AMX bf16");
+        let (kp, np) = (k.next_multiple_of(INNER), n.next_multiple_of(BLOCK));
+        PackedRight { data: spare_words(kp / 2 * np), k, n, kp, np }
+    }
+
+    /// The words of each block of `rows` factor rows in turn (the last block's padding
+    /// included): as many blocks as `k.div_ceil(rows)`.
+    ///
+    /// # Panics
+    /// When `rows` is not a positive multiple of [`INNER`] (a block must hold whole pairs and
+    /// end on a padded row).
+    pub(crate) fn row_blocks(&mut self, rows: usize) -> impl Iterator<Item = &mut [u32]> {
+        assert!(rows > 0 && rows % INNER == 0, "row blocks of {rows} rows");
+        self.data.chunks_mut(rows / 2 * self.np)
+    }
+}
+
+/// Packs the row-major rows `block` into `words`, a block of [`PackedRight::row_blocks`] of
+/// the factor those rows belong to (the same words [`PackedRight::new`] writes for them).
+///
+/// # Panics
+/// When `block` is not row-major, or `words` is not one such block of its width.
+pub(crate) fn pack_right_block(words: &mut [u32], block: MatRef<'_>) {
+    assert!(bf16_matmul_available(), "packing on a machine without AMX bf16");
+    assert_eq!(block.col_stride, 1, "pack_right_block packs row-major rows");
+    let np = block.cols.next_multiple_of(BLOCK);
+    assert!(words.len() % np == 0 && 2 * words.len() / np >= block.rows, "words of another block");
+    // SAFETY: AVX-512F is present where AMX is (asserted above); `words` holds whole word rows.
+    unsafe { pack_right_rows(words, block, 0, np) };
+}
+
 impl Drop for PackedRight {
     fn drop(&mut self) {
         give_back(std::mem::take(&mut self.data));

@@ -15,7 +15,9 @@ use super::Op;
 use super::unary::sigmoid;
 use rayon::prelude::*;
 
-use crate::bf16::{MatmulPrecision, PackedRight, gemm_bf16, gemm_bf16_single_thread, tiles_take};
+use crate::bf16::{
+    MatmulPrecision, PackedRight, gemm_bf16, gemm_bf16_single_thread, pack_right_block, tiles_take,
+};
 use crate::kernels::{self, MatRef, ROW_BLOCK, gemm, gemm_single_thread};
 use crate::shape::Shape;
 use crate::tape::{GradSink, Reader, Tape, Var};
@@ -107,42 +109,60 @@ pub(crate) fn backward(
         return; // no output: every gradient of this layer is empty or zero-rows
     }
     let want_db = b.filter(|&b| s.needs(b));
+    let want_dw = s.needs(w);
     let mut dx = (s.needs(x) && sx.cols > 0).then(|| s.slot(x));
     let wt = dx.as_ref().map(|_| Right::of(MatRef::new(r.value(w), sw).t(), precision));
-    // Per block: dz = g ⊙ act'(y) in place, the block's bias-gradient sums, and dx = dz·Wᵀ.
-    let finish_block = |g_block: &mut [f32], y_block: &[f32], dx_block: Option<(&mut [f32], bool)>| {
+    // `dW = xᵀ·dz` on the tiles takes `dz` packed in pairs of rows: each block packs its own
+    // rows while they are hot, instead of a pass over the whole of `dz` afterwards.
+    let tiled_dw = want_dw && precision == MatmulPrecision::Bf16 && tiles_take(sx.rows, cols);
+    let mut dz_packed = tiled_dw.then(|| PackedRight::zeroed(sx.rows, cols));
+    let block_count = sx.rows.div_ceil(ROW_BLOCK);
+    let mut dz_words: Vec<Option<&mut [u32]>> = match dz_packed.as_mut() {
+        Some(p) => p.row_blocks(ROW_BLOCK).map(Some).collect(),
+        None => (0..block_count).map(|_| None).collect(),
+    };
+    debug_assert_eq!(dz_words.len(), block_count);
+    // Per block: dz = g ⊙ act'(y) in place (and packed for dW), the block's bias-gradient sums,
+    // and dx = dz·Wᵀ.
+    let finish_block = |g_block: &mut [f32],
+                        y_block: &[f32],
+                        dz_words: &mut Option<&mut [u32]>,
+                        dx_block: Option<(&mut [f32], bool)>| {
         if act != Activation::Identity {
             g_block.iter_mut().zip(y_block).for_each(|(g, &y)| *g *= act.derivative_from_output(y));
         }
+        let dz = MatRef::new(g_block, Shape::new(g_block.len() / cols, cols));
+        if let Some(words) = dz_words.as_deref_mut() {
+            pack_right_block(words, dz);
+        }
         if let (Some((dx_block, fresh)), Some(wt)) = (dx_block, wt.as_ref()) {
-            wt.product(dx_block, MatRef::new(g_block, Shape::new(g_block.len() / cols, cols)), !fresh);
+            wt.product(dx_block, dz, !fresh);
         }
         want_db.map(|_| kernels::dense_block_sums(g_block, cols))
     };
     let per_job = min_blocks_per_job(sx.rows * sx.cols * cols);
     let (g_blocks, y_blocks) = (g.par_chunks_mut(ROW_BLOCK * cols), out.par_chunks(ROW_BLOCK * cols));
+    let blocks = g_blocks.zip(y_blocks).zip(dz_words.par_iter_mut());
     let partials: Vec<Option<Vec<f64>>> = match dx.as_mut() {
-        Some((dx, fresh)) => g_blocks
-            .zip(y_blocks)
+        Some((dx, fresh)) => blocks
             .zip(dx.par_chunks_mut(ROW_BLOCK * sx.cols))
             .with_min_len(per_job)
-            .map(|((g, y), d)| finish_block(g, y, Some((d, *fresh))))
+            .map(|(((g, y), words), d)| finish_block(g, y, words, Some((d, *fresh))))
             .collect(),
-        None => g_blocks.zip(y_blocks).with_min_len(per_job).map(|(g, y)| finish_block(g, y, None)).collect(),
+        None => blocks.with_min_len(per_job).map(|((g, y), words)| finish_block(g, y, words, None)).collect(),
     };
+    drop(dz_words);
     if let Some(b) = want_db {
         let partials: Vec<Vec<f64>> = partials.into_iter().flatten().collect();
         let (db, fresh) = s.slot(b);
         kernels::combine_block_sums(db, &partials, !fresh);
     }
-    if s.needs(w) {
+    if want_dw {
         let (dw, fresh) = s.slot(w);
-        let dz = MatRef::new(g, Shape::new(sx.rows, cols));
         let xt = MatRef::new(r.value(x), sx).t();
-        if precision == MatmulPrecision::Bf16 && tiles_take(sx.rows, cols) {
-            gemm_bf16(dw, xt, &PackedRight::new(dz), !fresh);
-        } else {
-            gemm(dw, xt, dz, !fresh);
+        match dz_packed {
+            Some(dz) => gemm_bf16(dw, xt, &dz, !fresh),
+            None => gemm(dw, xt, MatRef::new(g, Shape::new(sx.rows, cols)), !fresh),
         }
     }
 }
