@@ -265,7 +265,7 @@ impl PackedRight {
     /// When `rows` is not a positive multiple of [`INNER`] (a block must hold whole pairs and
     /// end on a padded row).
     pub(crate) fn row_blocks(&mut self, rows: usize) -> impl Iterator<Item = &mut [u32]> {
-        assert!(rows > 0 && rows % INNER == 0, "row blocks of {rows} rows");
+        assert!(rows > 0 && rows.is_multiple_of(INNER), "row blocks of {rows} rows");
         self.data.chunks_mut(rows / 2 * self.np)
     }
 }
@@ -279,7 +279,7 @@ pub(crate) fn pack_right_block(words: &mut [u32], block: MatRef<'_>) {
     assert!(bf16_matmul_available(), "packing on a machine without AMX bf16");
     assert_eq!(block.col_stride, 1, "pack_right_block packs row-major rows");
     let np = block.cols.next_multiple_of(BLOCK);
-    assert!(words.len() % np == 0 && 2 * words.len() / np >= block.rows, "words of another block");
+    assert!(words.len().is_multiple_of(np) && 2 * words.len() / np >= block.rows, "words of another block");
     // SAFETY: AVX-512F is present where AMX is (asserted above); `words` holds whole word rows.
     unsafe { pack_right_rows(words, block, 0, np) };
 }
