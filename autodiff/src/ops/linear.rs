@@ -121,7 +121,7 @@ pub(crate) fn backward(
         Some(p) => p.row_blocks(ROW_BLOCK).map(Some).collect(),
         None => (0..block_count).map(|_| None).collect(),
     };
-    debug_assert_eq!(dz_words.len(), block_count);
+    assert_eq!(dz_words.len(), block_count, "dz's packed blocks and the row blocks differ");
     // Per block: dz = g ⊙ act'(y) in place (and packed for dW), the block's bias-gradient sums,
     // and dx = dz·Wᵀ.
     let finish_block = |g_block: &mut [f32],
