@@ -230,25 +230,22 @@ impl PackedRight {
     /// When [`bf16_matmul_available`] is false (the packing uses AVX-512, which every CPU with
     /// AMX has).
     pub(crate) fn new(b: MatRef<'_>) -> Self {
-        assert!(bf16_matmul_available(), "PackedRight on a machine without AMX bf16");
         let (k, n) = (b.rows, b.cols);
-        let (kp, np) = (k.next_multiple_of(INNER), n.next_multiple_of(BLOCK));
-        let mut data = spare_words(kp / 2 * np);
+        let mut packed = PackedRight::zeroed(k, n);
+        let np = packed.np;
         let chunk = 16 * np; // 16 word rows: one tile's height
-        // SAFETY: AVX-512F is present where AMX is (asserted above).
+        // SAFETY: AVX-512F is present where AMX is (`zeroed` asserted it).
         let fill = |(c, rows): (usize, &mut [u32])| unsafe { pack_right_rows(rows, b, 16 * c, np) };
         if k * n >= 1 << 16 {
-            data.par_chunks_mut(chunk).enumerate().for_each(fill);
+            packed.data.par_chunks_mut(chunk).enumerate().for_each(fill);
         } else {
-            data.chunks_mut(chunk).enumerate().for_each(fill);
+            packed.data.chunks_mut(chunk).enumerate().for_each(fill);
         }
-        PackedRight { data, k, n, kp, np }
+        packed
     }
-}
 
-impl PackedRight {
-    /// A `k × n` factor of zeros, whose pairs the caller packs block by block
-    /// ([`PackedRight::row_blocks`], [`pack_right_block`]) where it computes the rows.
+    /// A `k × n` factor of zeros, whose pairs [`PackedRight::new`] fills, or the caller block by
+    /// block ([`PackedRight::row_blocks`], [`pack_right_block`]) where it computes the rows.
     ///
     /// # Panics
     /// As [`PackedRight::new`].
