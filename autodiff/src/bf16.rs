@@ -28,7 +28,9 @@
 //!   16×32 tiles of the left factor (`tmm4, 5`) and two 32×16 tiles of the right factor in VNNI
 //!   pairs (`tmm6, 7`). The right factor is packed once per product ([`PackedRight`]), the left
 //!   one 32 rows at a time into a per-thread buffer, or, when its columns are contiguous (the
-//!   `xᵀ` of a weight gradient), whole in one pass ([`PackedLeft`]). Only the packing differs
+//!   `xᵀ` of a weight gradient), whole in one pass ([`PackedLeft`]) — or, for a layer that
+//!   trains, block by block in its forward, where each block of `x`'s rows has just been read
+//!   ([`pack_transposed_block`]; the tape keeps it for the backward). Only the packing differs
 //!   between these paths, never the order of a sum.
 //!
 //! Permission: Linux gives a process the AMX state only after it asks
@@ -201,7 +203,7 @@ unsafe fn pairs_along(block: &mut [u32; 256], m: MatRef<'_>, r0: usize, k0: usiz
 
 /// Packed bf16 pairs on whole cache lines, so that every tile row the kernel loads starts on a
 /// line: the layouts keep rows and tiles at multiples of 16 words ([`crate::lines`]).
-type Words = LineBuf<u32>;
+pub(crate) type Words = LineBuf<u32>;
 
 /// A 32 × 32 output block on whole cache lines (tile stores, [`crate::lines`]).
 #[repr(C, align(64))]
@@ -327,33 +329,105 @@ unsafe fn pack_right_rows(rows: &mut [u32], b: MatRef<'_>, q0: usize, np: usize)
 /// each block of 16 rows, the tile's 16 rows of 16 words (word `(r, q)` the pair
 /// `(A[r][2q], A[r][2q + 1])`), zeros in the padding. Packed in one pass over `A`'s memory
 /// (blocks of inner pairs in parallel), where packing 32 rows at a time would read all of it
-/// with a stride per row.
-struct PackedLeft {
+/// with a stride per row; or by the caller, one block of `Aᵀ`'s rows at a time while it computes
+/// them ([`PackedLeft::for_transpose`], [`pack_transposed_block`]): a layer's forward packs the
+/// `xᵀ` of its weight gradient that way.
+pub(crate) struct PackedLeft {
     data: Words,
     /// Row blocks of 16 (rows rounded up to 32, over 16).
     row_tiles: usize,
+    /// `A`'s rows and inner dimension.
+    m: usize,
+    k: usize,
 }
 
 impl PackedLeft {
     /// # Safety
     /// The CPU must have AVX-512F.
     unsafe fn new(a: MatRef<'_>, kp: usize) -> Self {
-        let row_tiles = a.rows.next_multiple_of(BLOCK) / 16;
-        let mut data = spare_words(kp / 2 * 16 * row_tiles);
-        data.par_chunks_mut(256 * row_tiles).enumerate().for_each(|(qb, tiles)| {
-            let mut block = [0u32; 256];
-            for (t, tile) in tiles.chunks_exact_mut(256).enumerate() {
-                // block[qq][c]: row 16t + c's pair at columns 32qb + 2qq, + 1, i.e. the pairs down
-                // `aᵀ` (contiguous rows); the tile is its transpose.
-                // SAFETY: AVX-512F (the caller's); `tile` holds 16 rows of 16 words.
-                unsafe {
-                    pairs_down(&mut block, a.t(), 32 * qb, 16 * t);
-                    transpose16(&block, tile.as_mut_ptr(), 16);
-                }
-            }
+        debug_assert_eq!(kp, a.cols.next_multiple_of(INNER));
+        let words = spare_words_unzeroed(PackedLeft::words(a.rows, a.cols));
+        let mut left = PackedLeft::for_transpose(a.rows, a.cols, words);
+        let row_tiles = left.row_tiles;
+        left.data.par_chunks_mut(256 * row_tiles).enumerate().for_each(|(qb, tiles)| {
+            // SAFETY: AVX-512F (the caller's); `tiles` is inner block `qb`'s.
+            unsafe { pack_transposed_tiles(tiles, a.t(), 32 * qb, row_tiles) };
         });
-        PackedLeft { data, row_tiles }
+        left
     }
+
+    /// Room for the `m × k` factor `A` in `words` (any contents: every word is written when each
+    /// block of [`PackedLeft::transpose_blocks`] is packed by [`pack_transposed_block`]).
+    ///
+    /// # Panics
+    /// When [`bf16_matmul_available`] is false.
+    pub(crate) fn for_transpose(m: usize, k: usize, mut words: Words) -> Self {
+        assert!(bf16_matmul_available(), "PackedLeft on a machine without AMX bf16");
+        words.set_len(PackedLeft::words(m, k));
+        PackedLeft { data: words, row_tiles: m.next_multiple_of(BLOCK) / 16, m, k }
+    }
+
+    /// The words an `m × k` factor takes.
+    pub(crate) fn words(m: usize, k: usize) -> usize {
+        k.next_multiple_of(INNER) / 2 * m.next_multiple_of(BLOCK)
+    }
+
+    /// The words of each block of `rows` rows of `Aᵀ` (inner indices of `A`) in turn, the last
+    /// block's padding included: as many blocks as `k.div_ceil(rows)`, each with the tile count
+    /// [`pack_transposed_block`] needs.
+    ///
+    /// # Panics
+    /// When `rows` is not a positive multiple of [`INNER`].
+    pub(crate) fn transpose_blocks(&mut self, rows: usize) -> impl Iterator<Item = (&mut [u32], usize)> {
+        assert!(rows > 0 && rows.is_multiple_of(INNER), "row blocks of {rows} rows");
+        let row_tiles = self.row_tiles;
+        self.data.chunks_mut(rows / INNER * 256 * row_tiles).map(move |w| (w, row_tiles))
+    }
+
+    /// The buffer, for reuse.
+    pub(crate) fn into_words(mut self) -> Words {
+        std::mem::take(&mut self.data)
+    }
+}
+
+/// Packs rows `i0 ..` of the row-major `at` (= `Aᵀ`) into `tiles`, whole inner blocks of
+/// [`PackedLeft`]'s layout (`256 · row_tiles` words each) from inner index `i0` on; rows past
+/// `at`'s end and columns past its width are zeros.
+///
+/// # Safety
+/// The CPU must have AVX-512F.
+#[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx512f"))]
+unsafe fn pack_transposed_tiles(tiles: &mut [u32], at: MatRef<'_>, i0: usize, row_tiles: usize) {
+    let mut block = [0u32; 256];
+    for (qq, inner) in tiles.chunks_exact_mut(256 * row_tiles).enumerate() {
+        for (t, tile) in inner.chunks_exact_mut(256).enumerate() {
+            // block[qq][c]: row 16t + c's pair at inner indices i0 + 32qq + 2q, + 1, i.e. the
+            // pairs down `Aᵀ` (contiguous rows); the tile is its transpose.
+            // SAFETY: AVX-512F (the caller's); `tile` holds 16 rows of 16 words.
+            unsafe {
+                pairs_down(&mut block, at, i0 + 32 * qq, 16 * t);
+                transpose16(&block, tile.as_mut_ptr(), 16);
+            }
+        }
+    }
+}
+
+/// Packs the row-major rows `block` of `Aᵀ` into `words`, the block of
+/// [`PackedLeft::transpose_blocks`] that holds them (with its `row_tiles`).
+///
+/// # Panics
+/// When `block` is not row-major or `words` is not such a block for it.
+pub(crate) fn pack_transposed_block(words: &mut [u32], row_tiles: usize, block: MatRef<'_>) {
+    assert!(bf16_matmul_available(), "packing on a machine without AMX bf16");
+    assert_eq!(block.col_stride, 1, "pack_transposed_block packs row-major rows");
+    assert!(
+        block.cols.next_multiple_of(BLOCK) / 16 == row_tiles
+            && words.len().is_multiple_of(256 * row_tiles)
+            && words.len() / (256 * row_tiles) * INNER >= block.rows,
+        "words of another block"
+    );
+    // SAFETY: AVX-512F is present where AMX is (asserted above).
+    unsafe { pack_transposed_tiles(words, block, 0, row_tiles) };
 }
 
 impl Drop for PackedLeft {
@@ -375,7 +449,21 @@ thread_local! {
 /// came from the kernel as zeroed pages each time (page faults and clearing: ~3% of the
 /// paper's bf16 step).
 fn spare_words(len: usize) -> Words {
-    let mut w = SPARE
+    let mut w = spare_buffer(len);
+    w.set_zeroed(len);
+    w
+}
+
+/// [`spare_words`] without the zeros: `len` words of any value, for a factor that writes them all.
+fn spare_words_unzeroed(len: usize) -> Words {
+    let mut w = spare_buffer(len);
+    w.set_len(len);
+    w
+}
+
+/// The spare buffer that best holds `len` words (module docs of [`spare_words`]), or a new one.
+fn spare_buffer(len: usize) -> Words {
+    SPARE
         .with_borrow_mut(|spare| {
             // The smallest that holds `len`, else the largest (grown): a large buffer taken for
             // a small factor would leave the next large one to fresh pages.
@@ -383,9 +471,7 @@ fn spare_words(len: usize) -> Words {
             let fits = (0..spare.len()).filter(|&i| spare[i].capacity() >= len).min_by_key(by_capacity);
             fits.or_else(|| (0..spare.len()).max_by_key(by_capacity)).map(|i| spare.swap_remove(i))
         })
-        .unwrap_or_default();
-    w.set_zeroed(len);
-    w
+        .unwrap_or_default()
 }
 
 /// Keeps `w` for [`spare_words`] (the largest [`SPARES`] of them).
@@ -462,29 +548,50 @@ fn check(dst: &[f32], a: MatRef<'_>, b: &PackedRight) {
 /// ([`PackedLeft`]).
 pub(crate) fn gemm_bf16(dst: &mut [f32], a: MatRef<'_>, b: &PackedRight, accumulate: bool) {
     let n = b.n;
-    if n == 0 || a.rows <= BLOCK {
+    if n == 0 || !packs_left_whole(a.rows) {
         return gemm_bf16_single_thread(dst, a, b, accumulate);
     }
     if a.row_stride == 1 && a.col_stride != 1 {
         check(dst, a, b);
         // SAFETY: AVX-512F is present where AMX is (checked).
         let left = unsafe { PackedLeft::new(a, b.kp) };
-        let q_step = 256 * left.row_tiles;
-        let base = SendPtr(left.data.as_ptr());
-        dst.par_chunks_mut(BLOCK * n).enumerate().for_each(|(block, d)| {
-            // SAFETY: row tiles 2·block and 2·block + 1 exist (rows rounded up to 32); the tile
-            // state was granted (checked); `d` holds this block's rows.
-            unsafe {
-                let tiles =
-                    LeftTiles { base: base.get().add(2 * block * 256), half_step: 256, q_step, stride: 64 };
-                block_row(d, d.len() / n, tiles, b, accumulate);
-            }
-        });
-        return;
+        return gemm_bf16_packed_left(dst, &left, b, accumulate);
     }
     dst.par_chunks_mut(BLOCK * n).enumerate().for_each(|(block, d)| {
         gemm_bf16_single_thread(d, a.row_range(block * BLOCK, d.len() / n), b, accumulate);
     });
+}
+
+/// `dst (m×n) = a·b` (or `+=`) with the left factor packed already, blocks of 32 output rows
+/// spread over the pool (the same bits as [`gemm_bf16`] on the unpacked factor).
+///
+/// # Panics
+/// On inconsistent dimensions.
+pub(crate) fn gemm_bf16_packed_left(dst: &mut [f32], a: &PackedLeft, b: &PackedRight, accumulate: bool) {
+    let n = b.n;
+    assert_eq!(a.k, b.k, "gemm_bf16: inner dimensions {} and {} differ", a.k, b.k);
+    assert_eq!(dst.len(), a.m * n, "gemm_bf16: destination holds {} values, expected {}×{n}", dst.len(), a.m);
+    if n == 0 || a.m == 0 {
+        return;
+    }
+    let q_step = 256 * a.row_tiles;
+    let base = SendPtr(a.data.as_ptr());
+    dst.par_chunks_mut(BLOCK * n).enumerate().for_each(|(block, d)| {
+        // SAFETY: row tiles 2·block and 2·block + 1 exist (rows rounded up to 32); the tile
+        // state was granted (`PackedLeft` exists only where it was); `d` holds this block's rows.
+        unsafe {
+            let tiles =
+                LeftTiles { base: base.get().add(2 * block * 256), half_step: 256, q_step, stride: 64 };
+            block_row(d, d.len() / n, tiles, b, accumulate);
+        }
+    });
+}
+
+/// Whether [`gemm_bf16`] packs a left factor of `rows` rows with contiguous columns whole
+/// ([`PackedLeft`]) rather than 32 rows at a time on one thread: when it has more than one block
+/// of rows to spread over the pool.
+pub(crate) fn packs_left_whole(rows: usize) -> bool {
+    rows > BLOCK
 }
 
 /// A pointer into data that outlives a parallel loop and is only read in it.
@@ -811,5 +918,34 @@ mod tests {
         let mut single = vec![0.0; m * n];
         one.install(|| gemm_bf16(&mut single, av, &packed, false));
         assert_eq!(single, whole);
+    }
+
+    /// `xᵀ` packed block by block from `x`'s rows (as a layer's forward packs it, into a buffer
+    /// holding stale words) is the factor packed whole from `xᵀ`, and gives the same product.
+    #[test]
+    fn xt_packed_by_row_blocks_is_xt_packed_whole() {
+        if !bf16_matmul_available() {
+            eprintln!("no AMX bf16 on this machine: the tile kernel is not exercised");
+            return;
+        }
+        for &(rows, cols, n, block) in &[(1100, 40, 24, 256), (300, 100, 33, 64), (64, 33, 16, 32)] {
+            let (x, dz) = (lcg(6, rows * cols, 2.0), lcg(7, rows * n, 2.0));
+            let xv = MatRef::new(&x, Shape::new(rows, cols));
+            let dz = PackedRight::new(MatRef::new(&dz, Shape::new(rows, n)));
+            let mut stale = LineBuf::zeroed(PackedLeft::words(cols, rows));
+            stale.fill(0xdead_beef);
+            let mut by_blocks = PackedLeft::for_transpose(cols, rows, stale);
+            let starts = (0..rows).step_by(block);
+            for ((words, row_tiles), start) in by_blocks.transpose_blocks(block).zip(starts) {
+                pack_transposed_block(words, row_tiles, xv.row_range(start, block.min(rows - start)));
+            }
+            // SAFETY: AVX-512F is present where AMX is.
+            let whole = unsafe { PackedLeft::new(xv.t(), rows.next_multiple_of(INNER)) };
+            assert!(by_blocks.data[..] == whole.data[..], "{rows}×{cols} in blocks of {block}");
+            let (mut want, mut got) = (vec![1.0; cols * n], vec![1.0; cols * n]);
+            gemm_bf16(&mut want, xv.t(), &dz, true);
+            gemm_bf16_packed_left(&mut got, &by_blocks, &dz, true);
+            assert_eq!(got, want);
+        }
     }
 }

@@ -44,6 +44,14 @@ impl<T: Copy + Default> LineBuf<T> {
         self.lines.resize(len.div_ceil(16), Line([T::default(); 16]));
         self.len = len;
     }
+
+    /// Makes the buffer `len` elements, reusing its allocation and keeping what it holds: the
+    /// first `min(len, old len)` are the old ones, any beyond zero. For a buffer whose every
+    /// element the caller writes (no clearing pass over megabytes it is about to fill).
+    pub(crate) fn set_len(&mut self, len: usize) {
+        self.lines.resize(len.div_ceil(16), Line([T::default(); 16]));
+        self.len = len;
+    }
 }
 
 impl<T: Copy> LineBuf<T> {

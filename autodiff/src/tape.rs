@@ -7,7 +7,7 @@
 //! Shape errors and use of a stale [`Var`] are programming errors and panic with a message that names
 //! the op and the shapes; user input never reaches the tape unvalidated.
 
-use crate::bf16::MatmulPrecision;
+use crate::bf16::{MatmulPrecision, PackedLeft, Words};
 use crate::ops::Op;
 use crate::params::{ParamId, ParamStore};
 use crate::pool::{Buf, Pool};
@@ -58,6 +58,11 @@ pub struct Tape {
     pub(crate) var_arena: Vec<Var>,
     pub(crate) idx_arena: Vec<u32>,
     pub(crate) f32_arena: Vec<f32>,
+    /// Factors packed in the forward for the backward's products (the `xᵀ` of a bf16 layer's
+    /// weight gradient: [`crate::ops::linear`]), by the index their op records.
+    pub(crate) packed: Vec<PackedLeft>,
+    /// The buffers of the last graph's packed factors, for the next graph's.
+    packed_spare: Vec<Words>,
     generation: u32,
     backward_done: bool,
     /// What the fused linear layers recorded from now on multiply in (already effective on this
@@ -84,6 +89,8 @@ impl Tape {
             var_arena: Vec::new(),
             idx_arena: Vec::new(),
             f32_arena: Vec::new(),
+            packed: Vec::new(),
+            packed_spare: Vec::new(),
             generation: 0,
             backward_done: false,
             matmul_precision: MatmulPrecision::F32,
@@ -131,6 +138,7 @@ impl Tape {
         self.var_arena.clear();
         self.idx_arena.clear();
         self.f32_arena.clear();
+        self.packed_spare.extend(self.packed.drain(..).map(PackedLeft::into_words));
         self.param_vars.clear();
         self.generation = self.generation.wrapping_add(1);
         self.backward_done = false;
@@ -250,6 +258,7 @@ impl Tape {
             var_arena: &self.var_arena,
             idx_arena: &self.idx_arena,
             f32_arena: &self.f32_arena,
+            packed: &self.packed,
         }
     }
 
@@ -291,6 +300,23 @@ impl Tape {
         let start = self.f32_arena.len() as u32;
         self.f32_arena.extend_from_slice(values);
         Span { start, len: values.len() as u32 }
+    }
+
+    /// A buffer for a factor of `len` words packed in the forward ([`Tape::packed`]): the
+    /// smallest spare one that holds them, else the largest, else a new one.
+    pub(crate) fn packed_words(&mut self, len: usize) -> Words {
+        let spare = &mut self.packed_spare;
+        let by_capacity = |&i: &usize| spare[i].capacity();
+        let fits = (0..spare.len()).filter(|&i| spare[i].capacity() >= len).min_by_key(by_capacity);
+        fits.or_else(|| (0..spare.len()).max_by_key(by_capacity))
+            .map(|i| spare.swap_remove(i))
+            .unwrap_or_default()
+    }
+
+    /// Keeps a factor packed in the forward for the backward; its index for the op to record.
+    pub(crate) fn keep_packed(&mut self, packed: PackedLeft) -> u32 {
+        self.packed.push(packed);
+        (self.packed.len() - 1) as u32
     }
 
     /// A pooled buffer for an op's output.
@@ -335,6 +361,7 @@ impl Tape {
                 var_arena: &self.var_arena,
                 idx_arena: &self.idx_arena,
                 f32_arena: &self.f32_arena,
+                packed: &self.packed,
             };
             let mut sink = GradSink {
                 nodes: &self.nodes,
@@ -357,6 +384,7 @@ pub(crate) struct Reader<'a> {
     pub var_arena: &'a [Var],
     pub idx_arena: &'a [u32],
     pub f32_arena: &'a [f32],
+    pub packed: &'a [PackedLeft],
 }
 
 impl<'a> Reader<'a> {

@@ -52,6 +52,8 @@ pub(crate) enum Op {
         act: Activation,
         /// The precision the products ran at (already [`crate::MatmulPrecision::effective`]).
         precision: MatmulPrecision,
+        /// Where the forward kept `xᵀ` packed for the weight gradient ([`crate::Tape::packed`]).
+        packed_xt: Option<u32>,
     },
     Binary {
         kind: BinaryKind,
@@ -120,7 +122,9 @@ pub(crate) fn backward(op: &Op, r: &Reader<'_>, s: &mut GradSink<'_>, out: &[f32
     match *op {
         Op::Leaf | Op::Param(_) | Op::StopGrad => {}
         Op::MatMul { a, b, ta, tb } => matmul::backward(r, s, g, a, b, ta, tb),
-        Op::Linear { x, w, b, act, precision } => linear::backward(r, s, out, g, x, w, b, act, precision),
+        Op::Linear { x, w, b, act, precision, packed_xt } => {
+            linear::backward(r, s, out, g, x, w, b, act, precision, packed_xt)
+        }
         Op::Binary { kind, a, b } => binary::backward(r, s, out, g, kind, a, b),
         Op::Unary { kind, a } => unary::backward(r, s, out, g, kind, a),
         Op::Softmax { a, log } => softmax::backward(r, s, out, g, a, log),
