@@ -29,8 +29,8 @@
 //!   pairs (`tmm6, 7`). The right factor is packed once per product ([`PackedRight`]), the left
 //!   one 32 rows at a time into a per-thread buffer, or, when its columns are contiguous (the
 //!   `xᵀ` of a weight gradient), whole in one pass ([`PackedLeft`]) — or, for a layer that
-//!   trains, block by block in its forward, where each block of `x`'s rows has just been read
-//!   ([`pack_transposed_block`]; the tape keeps it for the backward). Only the packing differs
+//!   trains, block by block in its forward from the pairs of `x`'s rows packed for its product
+//!   ([`gemm_bf16_single_thread_packing_xt`]; the tape keeps it for the backward). Only the packing differs
 //!   between these paths, never the order of a sum.
 //!
 //! Permission: Linux gives a process the AMX state only after it asks
@@ -510,18 +510,53 @@ struct LeftTiles {
 /// On inconsistent dimensions, or when [`bf16_matmul_available`] is false (a programming error:
 /// callers choose this path only when it is true).
 pub(crate) fn gemm_bf16_single_thread(dst: &mut [f32], a: MatRef<'_>, b: &PackedRight, accumulate: bool) {
+    gemm_rows(dst, a, b, accumulate, None);
+}
+
+/// [`gemm_bf16_single_thread`] that also packs `aᵀ` as the left factor of a later product
+/// (`xᵀ·dz`, the weight gradient of the layer whose input `a` is): into `xt`, the block of
+/// [`PackedLeft::transpose_blocks`] holding `a`'s rows, with its `row_tiles`. Each 32 rows'
+/// pairs come from the block of bf16 pairs just packed for this product, still in L1, not
+/// from `a` again (the same words as [`pack_transposed_block`] on `a`).
+///
+/// # Panics
+/// As [`gemm_bf16_single_thread`], and when `xt` is not such a block for `a`.
+pub(crate) fn gemm_bf16_single_thread_packing_xt(
+    dst: &mut [f32],
+    a: MatRef<'_>,
+    b: &PackedRight,
+    accumulate: bool,
+    xt: &mut [u32],
+    row_tiles: usize,
+) {
+    assert!(
+        b.kp == 16 * row_tiles
+            && xt.len().is_multiple_of(256 * row_tiles)
+            && xt.len() / (256 * row_tiles) * INNER >= a.rows,
+        "words of another block"
+    );
+    gemm_rows(dst, a, b, accumulate, Some(xt));
+}
+
+/// [`gemm_bf16_single_thread_packing_xt`], or without `xt` [`gemm_bf16_single_thread`].
+fn gemm_rows(dst: &mut [f32], a: MatRef<'_>, b: &PackedRight, accumulate: bool, xt: Option<&mut [u32]>) {
     let (m, n) = (a.rows, b.n);
     check(dst, a, b);
     if m == 0 || n == 0 {
         return;
     }
     let half = b.kp / 2;
+    let mut xt_blocks = xt.map(|w| w.chunks_exact_mut(16 * b.kp));
     LEFT.with_borrow_mut(|left| {
         left.set_zeroed(BLOCK * half);
         for i0 in (0..m).step_by(BLOCK) {
             let rows = BLOCK.min(m - i0);
             // SAFETY: AVX-512F is present where AMX is (checked).
             unsafe { pack_left(left, a, i0, rows) };
+            if let Some(tiles) = xt_blocks.as_mut().and_then(Iterator::next) {
+                // SAFETY: as above; `left` holds 32 rows of `half` words, `tiles` 256 · kp / 16.
+                unsafe { transposed_tiles_from_left(tiles, left, half) };
+            }
             let tiles = LeftTiles {
                 base: left.as_ptr(),
                 half_step: 16 * half,
@@ -533,6 +568,29 @@ pub(crate) fn gemm_bf16_single_thread(dst: &mut [f32], a: MatRef<'_>, b: &Packed
             unsafe { block_row(&mut dst[i0 * n..(i0 + rows) * n], rows, tiles, b, accumulate) };
         }
     });
+}
+
+/// One inner block of [`PackedLeft`]'s layout for `Aᵀ` (`tiles`: `2 · half / 16` tiles of 256
+/// words) from the 32 rows of `A` in `left` ([`pack_left`]'s layout: row `r` `half` words, its
+/// bf16 values in order as 16-bit halves): tile `t`'s block before its transpose has row `q`
+/// interleaving the values of `A`'s rows `2q` and `2q + 1` at columns `16t ..`.
+///
+/// # Safety
+/// The CPU must have AVX-512F.
+#[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx512f"))]
+unsafe fn transposed_tiles_from_left(tiles: &mut [u32], left: &[u32], half: usize) {
+    let mut block = [0u32; 256];
+    for (t, tile) in tiles.chunks_exact_mut(256).enumerate() {
+        for (q, words) in block.chunks_exact_mut(16).enumerate() {
+            let (even, odd) = (&left[2 * q * half + 8 * t..][..8], &left[(2 * q + 1) * half + 8 * t..][..8]);
+            for (j, (&e, &o)) in even.iter().zip(odd).enumerate() {
+                words[2 * j] = (e & 0xffff) | (o << 16);
+                words[2 * j + 1] = (e >> 16) | (o & 0xffff_0000);
+            }
+        }
+        // SAFETY: AVX-512F (the caller's); `tile` holds 16 rows of 16 words.
+        unsafe { transpose16(&block, tile.as_mut_ptr(), 16) };
+    }
 }
 
 /// The dimensions agree and the tiles can run (panics otherwise: module docs).

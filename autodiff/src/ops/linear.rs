@@ -4,9 +4,10 @@
 //! finish each block while it is still in cache: forward, a block's GEMM then its bias and
 //! activation; backward, a block's activation derivative, its bias-gradient partial sums and its
 //! `dx` GEMM. Only `dW = xᵀ·dz`, which needs every row, runs as one separate GEMM; in bf16 its
-//! factors are packed in the blocks all the same, `xᵀ` in the forward (kept on the tape, half
-//! the size of `x`: +36% peak memory on the paper's step, for 6–14% less time) and `dz` in the
-//! backward, each while its rows are in cache. Measured
+//! factors are packed in the blocks all the same, `xᵀ` in the forward from the bf16 pairs its
+//! product has just packed (kept on the tape, half the size of `x`: +36% peak memory on the
+//! paper's step, for ~4% less time) and `dz` in the backward, each while its rows are in cache.
+//! Measured
 //! against whole-batch passes: 10% faster single-threaded on the 8×256 MLP, neutral on 2-thread
 //! training steps (BENCHMARKS.md, "What got the step here"). Every value is computed exactly as by
 //! the unfused passes (a block's GEMM rows equal the whole GEMM's; the bias sums use the
@@ -20,7 +21,8 @@ use rayon::prelude::*;
 
 use crate::bf16::{
     MatmulPrecision, PackedLeft, PackedRight, gemm_bf16, gemm_bf16_packed_left, gemm_bf16_single_thread,
-    pack_right_block, pack_transposed_block, packs_left_whole, tiles_take,
+    gemm_bf16_single_thread_packing_xt, pack_right_block, pack_transposed_block, packs_left_whole,
+    tiles_take,
 };
 use crate::kernels::{self, MatRef, ROW_BLOCK, gemm, gemm_single_thread};
 use crate::shape::Shape;
@@ -100,9 +102,16 @@ impl Tape {
                             xt_block: &mut Option<(&mut [u32], usize)>| {
             let rows = block.len() / shape.cols;
             let x_block = xv.row_range(first_row, rows);
-            right.product(block, x_block, false);
-            if let Some((words, row_tiles)) = xt_block {
-                pack_transposed_block(words, *row_tiles, x_block);
+            match (&right, xt_block) {
+                (Right::Bf16(w), Some((words, row_tiles))) => {
+                    gemm_bf16_single_thread_packing_xt(block, x_block, w, false, words, *row_tiles)
+                }
+                (_, xt_block) => {
+                    right.product(block, x_block, false);
+                    if let Some((words, row_tiles)) = xt_block {
+                        pack_transposed_block(words, *row_tiles, x_block);
+                    }
+                }
             }
             for row in block.chunks_exact_mut(shape.cols) {
                 match bias {
