@@ -63,6 +63,11 @@ pub struct Tape {
     pub(crate) packed: Vec<PackedLeft>,
     /// The buffers of the last graph's packed factors, for the next graph's.
     packed_spare: Vec<Words>,
+    /// Bits recorded in the forward for the backward (a ReLU layer's `y > 0`, one an element:
+    /// [`crate::ops::linear`]), by the index their op records.
+    pub(crate) masks: Vec<Vec<u32>>,
+    /// The last graph's masks' buffers, for the next graph's.
+    mask_spare: Vec<Vec<u32>>,
     generation: u32,
     backward_done: bool,
     /// What the fused linear layers recorded from now on multiply in (already effective on this
@@ -91,6 +96,8 @@ impl Tape {
             f32_arena: Vec::new(),
             packed: Vec::new(),
             packed_spare: Vec::new(),
+            masks: Vec::new(),
+            mask_spare: Vec::new(),
             generation: 0,
             backward_done: false,
             matmul_precision: MatmulPrecision::F32,
@@ -139,6 +146,7 @@ impl Tape {
         self.idx_arena.clear();
         self.f32_arena.clear();
         self.packed_spare.extend(self.packed.drain(..).map(PackedLeft::into_words));
+        self.mask_spare.append(&mut self.masks);
         self.param_vars.clear();
         self.generation = self.generation.wrapping_add(1);
         self.backward_done = false;
@@ -259,6 +267,7 @@ impl Tape {
             idx_arena: &self.idx_arena,
             f32_arena: &self.f32_arena,
             packed: &self.packed,
+            masks: &self.masks,
         }
     }
 
@@ -319,6 +328,20 @@ impl Tape {
         (self.packed.len() - 1) as u32
     }
 
+    /// `len` words for a mask recorded in the forward ([`Tape::masks`]), in a buffer the last
+    /// graph's masks left when one is spare (their contents are overwritten).
+    pub(crate) fn mask_words(&mut self, len: usize) -> Vec<u32> {
+        let mut words = self.mask_spare.pop().unwrap_or_default();
+        words.resize(len, 0);
+        words
+    }
+
+    /// Keeps a mask recorded in the forward for the backward; its index for the op to record.
+    pub(crate) fn keep_mask(&mut self, mask: Vec<u32>) -> u32 {
+        self.masks.push(mask);
+        (self.masks.len() - 1) as u32
+    }
+
     /// A pooled buffer for an op's output.
     pub(crate) fn alloc(&mut self, shape: Shape) -> Buf {
         self.pool.take(shape.len())
@@ -362,6 +385,7 @@ impl Tape {
                 idx_arena: &self.idx_arena,
                 f32_arena: &self.f32_arena,
                 packed: &self.packed,
+                masks: &self.masks,
             };
             let mut sink = GradSink {
                 nodes: &self.nodes,
@@ -385,6 +409,7 @@ pub(crate) struct Reader<'a> {
     pub idx_arena: &'a [u32],
     pub f32_arena: &'a [f32],
     pub packed: &'a [PackedLeft],
+    pub masks: &'a [Vec<u32>],
 }
 
 impl<'a> Reader<'a> {

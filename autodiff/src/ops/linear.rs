@@ -3,15 +3,20 @@
 //! Both directions walk the batch in blocks of [`kernels::ROW_BLOCK`] rows, blocks in parallel, and
 //! finish each block while it is still in cache: forward, a block's GEMM then its bias and
 //! activation; backward, a block's activation derivative, its bias-gradient partial sums and its
-//! `dx` GEMM. Only `dW = xᵀ·dz`, which needs every row, runs as one separate GEMM; in bf16 its
-//! factors are packed in the blocks all the same, `xᵀ` in the forward from the bf16 pairs its
-//! product has just packed (kept on the tape, half the size of `x`: +36% peak memory on the
-//! paper's step, for ~4% less time) and `dz` in the backward, each while its rows are in cache.
-//! Measured
+//! `dx` GEMM. Only `dW = xᵀ·dz`, which needs every row, runs as one separate GEMM. Measured
 //! against whole-batch passes: 10% faster single-threaded on the 8×256 MLP, neutral on 2-thread
 //! training steps (BENCHMARKS.md, "What got the step here"). Every value is computed exactly as by
 //! the unfused passes (a block's GEMM rows equal the whole GEMM's; the bias sums use the
 //! reduction's own blocks), so the blocking changes no bits.
+//!
+//! What the backward needs is made in the forward's blocks where that saves a pass over memory
+//! (BENCHMARKS.md, "`xᵀ` packed in the forward"), again without changing a bit:
+//! - in bf16, `dW`'s factors are packed in the blocks: `xᵀ` in the forward from the bf16 pairs
+//!   the block's product has just packed (kept on the tape, [`Tape::packed`]: half the size of
+//!   `x`, +36% peak memory on the paper's step, for ~4% less time), `dz` in the backward's;
+//! - a ReLU layer that trains keeps one bit an element, `y > 0` ([`Tape::masks`]), and its
+//!   backward multiplies by those instead of reading the outputs again (160 KB instead of a
+//!   5 MB pass per 5000×256 layer from L3 or memory: ~5% of the paper's bf16 step).
 
 use serde::{Deserialize, Serialize};
 
@@ -88,6 +93,12 @@ impl Tape {
             let words = self.packed_words(PackedLeft::words(sx.cols, sx.rows));
             PackedLeft::for_transpose(sx.cols, sx.rows, words)
         });
+        // A ReLU layer's backward reads its derivative from one bit an element, written here
+        // while the block's outputs are in cache, not from the outputs (module docs).
+        let mut mask = (act == Activation::Relu
+            && shape.cols > 0
+            && [Some(x), Some(w), b].iter().flatten().any(|v| self.nodes[v.index()].requires_grad))
+        .then(|| self.mask_words(shape.len().div_ceil(32)));
         let (xv, wv) = (MatRef::new(self.value(x), sx), MatRef::new(self.value(w), sw));
         let bias = b.map(|b| self.value(b));
         let right = Right::of(wv, precision);
@@ -97,9 +108,15 @@ impl Tape {
             None => (0..block_count).map(|_| None).collect(),
         };
         assert_eq!(xt_blocks.len(), block_count, "xᵀ's packed blocks and the row blocks differ");
+        let mut mask_blocks: Vec<Option<&mut [u32]>> = match mask.as_mut() {
+            Some(m) => m.chunks_mut(ROW_BLOCK * shape.cols / 32).map(Some).collect(),
+            None => (0..block_count).map(|_| None).collect(),
+        };
+        assert_eq!(mask_blocks.len(), block_count, "the mask's blocks and the row blocks differ");
         let finish_block = |first_row: usize,
                             block: &mut [f32],
-                            xt_block: &mut Option<(&mut [u32], usize)>| {
+                            xt_block: &mut Option<(&mut [u32], usize)>,
+                            mask_block: &mut Option<&mut [u32]>| {
             let rows = block.len() / shape.cols;
             let x_block = xv.row_range(first_row, rows);
             match (&right, xt_block) {
@@ -120,19 +137,25 @@ impl Tape {
                     None => {}
                 }
             }
+            if let Some(words) = mask_block {
+                positive_bits(words, block);
+            }
         };
         if shape.cols > 0 {
             out.as_mut_slice()
                 .par_chunks_mut(ROW_BLOCK * shape.cols)
-                .zip(xt_blocks.par_iter_mut())
+                .zip(xt_blocks.par_iter_mut().zip(mask_blocks.par_iter_mut()))
                 .enumerate()
                 .with_min_len(min_blocks_per_job(sx.rows * sx.cols * sw.cols))
-                .for_each(|(i, (block, xt_block))| finish_block(i * ROW_BLOCK, block, xt_block));
+                .for_each(|(i, (block, (xt_block, mask_block)))| {
+                    finish_block(i * ROW_BLOCK, block, xt_block, mask_block)
+                });
         }
-        drop(xt_blocks);
+        drop((xt_blocks, mask_blocks));
         let packed_xt = xt.map(|p| self.keep_packed(p));
+        let relu_mask = mask.map(|m| self.keep_mask(m));
         let inputs = [x, w, b.unwrap_or(w)];
-        self.push(Op::Linear { x, w, b, act, precision, packed_xt }, shape, out, &inputs)
+        self.push(Op::Linear { x, w, b, act, precision, packed_xt, relu_mask }, shape, out, &inputs)
     }
 }
 
@@ -148,6 +171,7 @@ pub(crate) fn backward(
     act: Activation,
     precision: MatmulPrecision,
     packed_xt: Option<u32>,
+    relu_mask: Option<u32>,
 ) {
     let (sx, sw) = (r.shape(x), r.shape(w));
     let cols = sw.cols;
@@ -170,12 +194,17 @@ pub(crate) fn backward(
     assert_eq!(dz_words.len(), block_count, "dz's packed blocks and the row blocks differ");
     // Per block: dz = g ⊙ act'(y) in place (and packed for dW), the block's bias-gradient sums,
     // and dx = dz·Wᵀ.
+    let mask = relu_mask.map(|i| &r.masks[i as usize][..]);
     let finish_block = |g_block: &mut [f32],
-                        y_block: &[f32],
+                        (i, y_block): (usize, &[f32]),
                         dz_words: &mut Option<&mut [u32]>,
                         dx_block: Option<(&mut [f32], bool)>| {
-        if act != Activation::Identity {
-            g_block.iter_mut().zip(y_block).for_each(|(g, &y)| *g *= act.derivative_from_output(y));
+        match mask {
+            Some(mask) => times_bits(g_block, &mask[i * ROW_BLOCK * cols / 32..]),
+            None if act != Activation::Identity => {
+                g_block.iter_mut().zip(y_block).for_each(|(g, &y)| *g *= act.derivative_from_output(y))
+            }
+            None => {}
         }
         let dz = MatRef::new(g_block, Shape::new(g_block.len() / cols, cols));
         if let Some(words) = dz_words.as_deref_mut() {
@@ -188,7 +217,7 @@ pub(crate) fn backward(
     };
     let per_job = min_blocks_per_job(sx.rows * sx.cols * cols);
     let (g_blocks, y_blocks) = (g.par_chunks_mut(ROW_BLOCK * cols), out.par_chunks(ROW_BLOCK * cols));
-    let blocks = g_blocks.zip(y_blocks).zip(dz_words.par_iter_mut());
+    let blocks = g_blocks.zip(y_blocks.enumerate()).zip(dz_words.par_iter_mut());
     let partials: Vec<Option<Vec<f64>>> = match dx.as_mut() {
         Some((dx, fresh)) => blocks
             .zip(dx.par_chunks_mut(ROW_BLOCK * sx.cols))
@@ -237,6 +266,96 @@ impl<'a> Right<'a> {
             Right::F32(b) => gemm_single_thread(dst, a, *b, accumulate),
             Right::Bf16(b) => gemm_bf16_single_thread(dst, a, b, accumulate),
         }
+    }
+}
+
+/// `words` = the bits of `y > 0` of `y`'s elements, element `32w + i` in bit `i` of word `w`
+/// (the last word's high bits 0). NaN is not positive, as [`Activation::derivative_from_output`]
+/// has it.
+fn positive_bits(words: &mut [u32], y: &[f32]) {
+    debug_assert!(words.len() >= y.len().div_ceil(32));
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx512f") {
+        // SAFETY: the CPU has AVX-512F (checked above).
+        unsafe { positive_bits_avx512(words, y) };
+        return;
+    }
+    positive_bits_portable(words, y);
+}
+
+/// [`positive_bits`] one value at a time.
+fn positive_bits_portable(words: &mut [u32], y: &[f32]) {
+    for (w, v) in words.iter_mut().zip(y.chunks(32)) {
+        *w = v.iter().enumerate().fold(0, |m, (i, &v)| m | (u32::from(v > 0.0) << i));
+    }
+}
+
+/// [`positive_bits`] sixteen values a compare.
+///
+/// # Safety
+/// The CPU must have AVX-512F.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn positive_bits_avx512(words: &mut [u32], y: &[f32]) {
+    use std::arch::x86_64::*;
+    let mut values = y.chunks_exact(32);
+    let zero = _mm512_setzero_ps();
+    for (w, v) in words.iter_mut().zip(&mut values) {
+        // SAFETY: `v` holds 32 values; unaligned loads.
+        let (lo, hi) = unsafe { (_mm512_loadu_ps(v.as_ptr()), _mm512_loadu_ps(v.as_ptr().add(16))) };
+        let (lo, hi) =
+            (_mm512_cmp_ps_mask::<_CMP_GT_OQ>(lo, zero), _mm512_cmp_ps_mask::<_CMP_GT_OQ>(hi, zero));
+        *w = u32::from(lo) | (u32::from(hi) << 16);
+    }
+    let rest = values.remainder();
+    if let Some(w) = words.get_mut(y.len() / 32).filter(|_| !rest.is_empty()) {
+        *w = rest.iter().enumerate().fold(0, |m, (i, &v)| m | (u32::from(v > 0.0) << i));
+    }
+}
+
+/// `g ⊙ relu'(y)` from the bits [`positive_bits`] wrote for `y` (starting at `g`'s first
+/// element): each `g` times 1 or 0, the same bits as multiplying by the derivative computed
+/// from `y`.
+fn times_bits(g: &mut [f32], words: &[u32]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx512f") {
+        // SAFETY: the CPU has AVX-512F (checked above).
+        unsafe { times_bits_avx512(g, words) };
+        return;
+    }
+    times_bits_portable(g, words);
+}
+
+/// [`times_bits`] one value at a time.
+fn times_bits_portable(g: &mut [f32], words: &[u32]) {
+    for (v, &w) in g.chunks_mut(32).zip(words) {
+        v.iter_mut().enumerate().for_each(|(i, g)| *g *= ((w >> i) & 1) as f32);
+    }
+}
+
+/// [`times_bits`] sixteen values a multiply.
+///
+/// # Safety
+/// The CPU must have AVX-512F.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn times_bits_avx512(g: &mut [f32], words: &[u32]) {
+    use std::arch::x86_64::*;
+    let last = words.get(g.len() / 32).copied();
+    let mut values = g.chunks_exact_mut(32);
+    let one = _mm512_set1_ps(1.0);
+    for (v, &w) in (&mut values).zip(words) {
+        let p = v.as_mut_ptr();
+        // SAFETY: `v` holds 32 values; unaligned loads and stores.
+        unsafe {
+            let lo = _mm512_mul_ps(_mm512_loadu_ps(p), _mm512_maskz_mov_ps(w as u16, one));
+            let hi = _mm512_mul_ps(_mm512_loadu_ps(p.add(16)), _mm512_maskz_mov_ps((w >> 16) as u16, one));
+            _mm512_storeu_ps(p, lo);
+            _mm512_storeu_ps(p.add(16), hi);
+        }
+    }
+    if let Some(w) = last {
+        values.into_remainder().iter_mut().enumerate().for_each(|(i, g)| *g *= ((w >> i) & 1) as f32);
     }
 }
 
@@ -351,6 +470,41 @@ mod tests {
             let size = norm(&mut want.iter().copied());
             assert!(error <= 3e-2 * size, "{name}: error {error} against norm {size}");
             assert!(error > 0.0, "{name}: bf16 gave the f32 bits on general values");
+        }
+    }
+
+    /// The ReLU bits: `y > 0` per element (NaN and both zeros not), and `g` times them gives
+    /// the bits of `g` times the derivative from `y` (−0.0 where `g` is negative), at lengths
+    /// that end inside a word, and the same from the vector and the portable code.
+    #[test]
+    fn relu_bits_give_the_derivative_from_the_output() {
+        let special = [f32::NAN, -0.0, 0.0, 1e-30, -1e-30, f32::INFINITY, f32::NEG_INFINITY];
+        for len in [0, 1, 16, 31, 32, 33, 100, 256 * 3 + 5] {
+            let y: Vec<f32> =
+                (0..len)
+                    .map(|i| {
+                        if i % 5 == 0 { special[i / 5 % special.len()] } else { ((i * 37 % 11) as f32) - 5.0 }
+                    })
+                    .collect();
+            let g: Vec<f32> = (0..len).map(|i| ((i * 13 % 7) as f32) - 3.5).collect();
+            let words = len.div_ceil(32);
+            let (mut bits, mut portable) = (vec![u32::MAX; words], vec![u32::MAX; words]);
+            positive_bits(&mut bits, &y);
+            positive_bits_portable(&mut portable, &y);
+            assert_eq!(bits, portable, "{len} values");
+            for (i, &v) in y.iter().enumerate() {
+                assert_eq!((bits[i / 32] >> (i % 32)) & 1 == 1, v > 0.0, "value {i} of {len}: {v}");
+            }
+            let want: Vec<u32> = g
+                .iter()
+                .zip(&y)
+                .map(|(g, &y)| (g * Activation::Relu.derivative_from_output(y)).to_bits())
+                .collect();
+            let (mut got, mut got_portable) = (g.clone(), g.clone());
+            times_bits(&mut got, &bits);
+            times_bits_portable(&mut got_portable, &bits);
+            assert_eq!(got.iter().map(|x| x.to_bits()).collect::<Vec<_>>(), want, "{len} values");
+            assert_eq!(got_portable.iter().map(|x| x.to_bits()).collect::<Vec<_>>(), want, "{len} values");
         }
     }
 }

@@ -54,6 +54,8 @@ pub(crate) enum Op {
         precision: MatmulPrecision,
         /// Where the forward kept `xᵀ` packed for the weight gradient ([`crate::Tape::packed`]).
         packed_xt: Option<u32>,
+        /// Where a ReLU layer kept the bits of `y > 0` for its backward ([`crate::Tape::masks`]).
+        relu_mask: Option<u32>,
     },
     Binary {
         kind: BinaryKind,
@@ -122,8 +124,8 @@ pub(crate) fn backward(op: &Op, r: &Reader<'_>, s: &mut GradSink<'_>, out: &[f32
     match *op {
         Op::Leaf | Op::Param(_) | Op::StopGrad => {}
         Op::MatMul { a, b, ta, tb } => matmul::backward(r, s, g, a, b, ta, tb),
-        Op::Linear { x, w, b, act, precision, packed_xt } => {
-            linear::backward(r, s, out, g, x, w, b, act, precision, packed_xt)
+        Op::Linear { x, w, b, act, precision, packed_xt, relu_mask } => {
+            linear::backward(r, s, out, g, x, w, b, act, precision, packed_xt, relu_mask)
         }
         Op::Binary { kind, a, b } => binary::backward(r, s, out, g, kind, a, b),
         Op::Unary { kind, a } => unary::backward(r, s, out, g, kind, a),
