@@ -233,10 +233,10 @@ impl PackedRight {
     /// AMX has).
     pub(crate) fn new(b: MatRef<'_>) -> Self {
         let (k, n) = (b.rows, b.cols);
-        let mut packed = PackedRight::zeroed(k, n);
+        let mut packed = PackedRight::unfilled(k, n);
         let np = packed.np;
         let chunk = 16 * np; // 16 word rows: one tile's height
-        // SAFETY: AVX-512F is present where AMX is (`zeroed` asserted it).
+        // SAFETY: AVX-512F is present where AMX is (`unfilled` asserted it).
         let fill = |(c, rows): (usize, &mut [u32])| unsafe { pack_right_rows(rows, b, 16 * c, np) };
         if k * n >= 1 << 16 {
             packed.data.par_chunks_mut(chunk).enumerate().for_each(fill);
@@ -246,12 +246,14 @@ impl PackedRight {
         packed
     }
 
-    /// A `k × n` factor of zeros, whose pairs [`PackedRight::new`] fills, or the caller block by
-    /// block ([`PackedRight::row_blocks`], [`pack_right_block`]) where it computes the rows.
+    /// Room for a `k × n` factor, its words any value until [`PackedRight::new`] fills them,
+    /// or the caller block by block ([`PackedRight::row_blocks`], [`pack_right_block`]) where it
+    /// computes the rows: each writes every word of what it packs, padding included, so the
+    /// buffer is not cleared first (a 2.5 MB pass per 5000×256 `dz`: 2% of the paper's step).
     ///
     /// # Panics
     /// As [`PackedRight::new`].
-    pub(crate) fn zeroed(k: usize, n: usize) -> Self {
+    pub(crate) fn unfilled(k: usize, n: usize) -> Self {
         assert!(bf16_matmul_available(), "PackedRight on a machine without AMX bf16");
         let (kp, np) = (k.next_multiple_of(INNER), n.next_multiple_of(BLOCK));
         PackedRight { data: spare_words(kp / 2 * np), k, n, kp, np }
@@ -289,7 +291,8 @@ impl Drop for PackedRight {
     }
 }
 
-/// Word rows `q0 .. q0 + 16` of [`PackedRight`]'s layout (`rows`, zeroed, `np` words each).
+/// Word rows `q0 ..` of [`PackedRight`]'s layout (`rows`: whole rows of `np` words; 16 of them
+/// when `b` is not row-major), every word written: zeros past `b`'s rows and columns.
 ///
 /// # Safety
 /// The CPU must have AVX-512F.
@@ -300,7 +303,8 @@ unsafe fn pack_right_rows(rows: &mut [u32], b: MatRef<'_>, q0: usize, np: usize)
         for (qq, row) in rows.chunks_exact_mut(np).enumerate() {
             let q = q0 + qq;
             if 2 * q >= k {
-                break;
+                row.fill(0);
+                continue;
             }
             let even = &b.data[b.offset(2 * q, 0)..][..n];
             if 2 * q + 1 < k {
@@ -309,8 +313,10 @@ unsafe fn pack_right_rows(rows: &mut [u32], b: MatRef<'_>, q0: usize, np: usize)
             } else {
                 row.iter_mut().zip(even).for_each(|(w, &e)| *w = pair(e, 0.0));
             }
+            row[n..].fill(0);
         }
     } else {
+        debug_assert_eq!(rows.len(), 16 * np);
         let mut block = [0u32; 256];
         for j0 in (0..n).step_by(16) {
             // block[c][qq]: column j0 + c's pair at rows 2(q0 + qq), + 1, i.e. row j0 + c of `bᵀ`
@@ -321,6 +327,8 @@ unsafe fn pack_right_rows(rows: &mut [u32], b: MatRef<'_>, q0: usize, np: usize)
                 transpose16(&block, rows[j0..].as_mut_ptr(), np);
             }
         }
+        let written = n.next_multiple_of(16);
+        rows.chunks_exact_mut(np).for_each(|row| row[written..].fill(0));
     }
 }
 
@@ -346,7 +354,7 @@ impl PackedLeft {
     /// The CPU must have AVX-512F.
     unsafe fn new(a: MatRef<'_>, kp: usize) -> Self {
         debug_assert_eq!(kp, a.cols.next_multiple_of(INNER));
-        let words = spare_words_unzeroed(PackedLeft::words(a.rows, a.cols));
+        let words = spare_words(PackedLeft::words(a.rows, a.cols));
         let mut left = PackedLeft::for_transpose(a.rows, a.cols, words);
         let row_tiles = left.row_tiles;
         left.data.par_chunks_mut(256 * row_tiles).enumerate().for_each(|(qb, tiles)| {
@@ -444,18 +452,11 @@ thread_local! {
     static SPARE: RefCell<Vec<Words>> = const { RefCell::new(Vec::new()) };
 }
 
-/// `len` zero words for a packed factor, in a buffer a dropped one left on this thread when one
-/// holds them. Why: every product packs its factors anew, and fresh multi-megabyte buffers
-/// came from the kernel as zeroed pages each time (page faults and clearing: ~3% of the
-/// paper's bf16 step).
+/// `len` words for a packed factor (any values: every packer writes all of its words, padding
+/// included), in a buffer a dropped one left on this thread when one holds them. Why: every
+/// product packs its factors anew, and fresh multi-megabyte buffers came from the kernel as
+/// zeroed pages each time (page faults and clearing: ~3% of the paper's bf16 step).
 fn spare_words(len: usize) -> Words {
-    let mut w = spare_buffer(len);
-    w.set_zeroed(len);
-    w
-}
-
-/// [`spare_words`] without the zeros: `len` words of any value, for a factor that writes them all.
-fn spare_words_unzeroed(len: usize) -> Words {
     let mut w = spare_buffer(len);
     w.set_len(len);
     w
@@ -927,6 +928,10 @@ mod tests {
                 let av = MatRef::new(&a, sa).maybe_t(ta);
                 let bv = MatRef::new(&b, sb).maybe_t(tb);
                 for accumulate in [false, true] {
+                    // A dropped factor of the same padded size, all words NaN, leaves its
+                    // buffer for the next: the padding must be written (0 · NaN is NaN).
+                    let (kp, np) = (k.next_multiple_of(INNER), n.next_multiple_of(BLOCK));
+                    drop(PackedRight::new(MatRef::new(&vec![f32::NAN; kp * np], Shape::new(kp, np))));
                     let (mut want, mut got) = (c0.clone(), c0.clone());
                     gemm(&mut want, av, bv, accumulate);
                     gemm_bf16(&mut got, av, &PackedRight::new(bv), accumulate);
@@ -991,7 +996,7 @@ mod tests {
             let xv = MatRef::new(&x, Shape::new(rows, cols));
             let dz = PackedRight::new(MatRef::new(&dz, Shape::new(rows, n)));
             let mut stale = LineBuf::zeroed(PackedLeft::words(cols, rows));
-            stale.fill(0xdead_beef);
+            stale.fill(0x7fc0_7fc0); // bf16 NaNs: a word left unwritten would poison a product
             let mut by_blocks = PackedLeft::for_transpose(cols, rows, stale);
             let starts = (0..rows).step_by(block);
             for ((words, row_tiles), start) in by_blocks.transpose_blocks(block).zip(starts) {

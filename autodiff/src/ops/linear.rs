@@ -185,7 +185,7 @@ pub(crate) fn backward(
     // `dW = xᵀ·dz` on the tiles takes `dz` packed in pairs of rows: each block packs its own
     // rows while they are hot, instead of a pass over the whole of `dz` afterwards.
     let tiled_dw = want_dw && precision == MatmulPrecision::Bf16 && tiles_take(sx.rows, cols);
-    let mut dz_packed = tiled_dw.then(|| PackedRight::zeroed(sx.rows, cols));
+    let mut dz_packed = tiled_dw.then(|| PackedRight::unfilled(sx.rows, cols));
     let block_count = sx.rows.div_ceil(ROW_BLOCK);
     let mut dz_words: Vec<Option<&mut [u32]>> = match dz_packed.as_mut() {
         Some(p) => p.row_blocks(ROW_BLOCK).map(Some).collect(),
