@@ -3,7 +3,7 @@
 //! change of the packer is measured on finished atlases without baking them again.
 //!
 //! ```sh
-//! cargo run --release -p nuvo-atlas --example pack_bench -- [--resolution 2048] [--gutter 4] ATLAS.obj...
+//! cargo run --release -p nuvo-atlas --example pack_bench -- [--resolution 2048] [--gutter 4] [--search 0] ATLAS.obj...
 //! ```
 
 use std::time::Instant;
@@ -12,18 +12,19 @@ use nuvo_atlas::islands::{IslandPacking, pack_islands};
 use nuvo_atlas::{load, partuv_metrics};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let mut opts = IslandPacking { resolution: 2048, gutter: 4, rotate: true };
+    let mut opts = IslandPacking { resolution: 2048, gutter: 4, rotate: true, search: 0 };
     let mut paths = Vec::new();
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
             "--resolution" => opts.resolution = args.next().ok_or("--resolution needs a value")?.parse()?,
             "--gutter" => opts.gutter = args.next().ok_or("--gutter needs a value")?.parse()?,
+            "--search" => opts.search = args.next().ok_or("--search needs a value")?.parse()?,
             _ => paths.push(a),
         }
     }
     if paths.is_empty() {
-        return Err("usage: pack_bench [--resolution N] [--gutter N] ATLAS.obj...".into());
+        return Err("usage: pack_bench [--resolution N] [--gutter N] [--search ATTEMPTS] ATLAS.obj...".into());
     }
     let (mut sum_before, mut sum_after, mut sum_angular, mut sum_s) = (0.0, 0.0, 0.0, 0.0);
     println!("{:<60} {:>7} {:>8} {:>8} {:>8} {:>7}", "mesh", "islands", "before", "after", "angular", "s");

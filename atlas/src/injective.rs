@@ -3494,7 +3494,7 @@ mod tests {
 
     /// Flipped and overlapping faces of `mesh` after packing its islands apart.
     fn flips_and_overlaps(mesh: &TriMesh) -> (usize, usize) {
-        let opts = crate::islands::IslandPacking { resolution: 1024, gutter: 2, rotate: true };
+        let opts = crate::islands::IslandPacking { resolution: 1024, gutter: 2, rotate: true, search: 0 };
         let packed = crate::islands::pack_islands(mesh, &opts).unwrap();
         let a = analyse_uv(&packed.mesh, None, 1024).unwrap();
         (a.stats.flipped_faces, a.stats.overlapping_faces)

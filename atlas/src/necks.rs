@@ -121,7 +121,7 @@ pub struct NeckOptions {
 impl Default for NeckOptions {
     fn default() -> Self {
         NeckOptions {
-            packing: IslandPacking { resolution: 512, gutter: 1, rotate: true },
+            packing: IslandPacking { resolution: 512, gutter: 1, rotate: true, search: 0 },
             max_trials: 20,
             candidates: 2,
             min_gain: 0.01,

@@ -19,7 +19,7 @@ fn join_by_hand() {
         let t = std::time::Instant::now();
         let out = join_small_islands(&m, &JoinOptions::default()).unwrap();
         let dt = t.elapsed();
-        let packing = IslandPacking { resolution: 2048, gutter: 4, rotate: true };
+        let packing = IslandPacking { resolution: 2048, gutter: 4, rotate: true, search: 0 };
         let packed = pack_islands(&out.mesh, &packing).unwrap().mesh;
         let (before, after) =
             (analyse_uv(&m, None, 1024).unwrap().stats, analyse_uv(&packed, None, 1024).unwrap().stats);

@@ -234,7 +234,12 @@ fn finish_layout(
         phases.done("necks");
     }
     if opts.packing == Packing::Islands {
-        let packing = IslandPacking { resolution: opts.atlas_resolution, gutter: opts.gutter, rotate: true };
+        let packing = IslandPacking {
+            resolution: opts.atlas_resolution,
+            gutter: opts.gutter,
+            rotate: true,
+            search: nuvo_atlas::islands::ORDER_SEARCH,
+        };
         let packed = pack_islands(&mesh, &packing)?;
         mesh = packed.mesh;
         summary.islands = Some(packed.islands);
