@@ -771,8 +771,13 @@ pub const ORDER_SEARCH: usize = 24;
 /// The relative rise of the scale each attempt of the order search asks for.
 pub const SEARCH_STEP: f64 = 0.01;
 
+/// Islands up to which the order search runs. Each attempt places every island, and its cost
+/// grows with the islands placed before it; Nuvo's atlases have few (Common Shapes: at most 28),
+/// while a marching-cubes mesh's hundreds of floaters gain nothing from an order.
+pub const SEARCH_UP_TO: usize = 64;
+
 /// The shape packing `best` (scale, placement) of [`best_shapes`], improved by a search over
-/// island orders: `attempts` times, the order and rule that packed last (at first, the first
+/// island orders (for 2 to [`SEARCH_UP_TO`] islands): `attempts` times, the order and rule that packed last (at first, the first
 /// of [`best_shapes`]' attempts that packs `best`'s scale) with two islands at most three
 /// places apart swapped (and, one time in four, another placement rule) is packed at
 /// [`SEARCH_STEP`] above the current scale; when it fits, it becomes the current packing, order
@@ -788,7 +793,7 @@ fn search_orders(
     best: (f64, Vec<ShapePlaced>),
     attempts: usize,
 ) -> (f64, Vec<ShapePlaced>) {
-    if attempts == 0 || islands.len() < 2 {
+    if attempts == 0 || islands.len() < 2 || islands.len() > SEARCH_UP_TO {
         return best;
     }
     let footprints =
