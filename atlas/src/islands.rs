@@ -762,10 +762,9 @@ fn best_shapes(
 }
 
 /// Packing attempts of the order search ([`search_orders`]) in `nuvo unwrap`'s final layout.
-/// On the 14 Common Shapes atlases (`atlas/examples/pack_bench.rs`, 2048², gutter 4, BENCHMARKS.md
-/// "An order search after the bisection"): mean efficiency 0.5955 → 0.6044 with 24 attempts
-/// (the horse 0.467 → 0.516, the bunny 0.584 → 0.620), packing 0.52 → 0.89 s a mesh; 48
-/// attempts 0.6053 for 1.10 s.
+/// Re-bakes of the 14 Common Shapes checkpoints (BENCHMARKS.md, "An order search after the
+/// bisection"): packing efficiency 0.5896 → 0.5991 (the bunny 0.584 → 0.632, the horse 0.470 →
+/// 0.489, some meshes unchanged), Editability unchanged, the pack phase 0.66 → 1.06 s a mesh.
 pub const ORDER_SEARCH: usize = 24;
 
 /// The relative rise of the scale each attempt of the order search asks for.
@@ -777,11 +776,11 @@ pub const SEARCH_STEP: f64 = 0.01;
 pub const SEARCH_UP_TO: usize = 64;
 
 /// The shape packing `best` (scale, placement) of [`best_shapes`], improved by a search over
-/// island orders (for 2 to [`SEARCH_UP_TO`] islands): `attempts` times, the order and rule that packed last (at first, the first
-/// of [`best_shapes`]' attempts that packs `best`'s scale) with two islands at most three
-/// places apart swapped (and, one time in four, another placement rule) is packed at
-/// [`SEARCH_STEP`] above the current scale; when it fits, it becomes the current packing, order
-/// and rule. Why: the bisection stops at the largest scale one of five fixed attempts packs, and
+/// island orders (for 2 to [`SEARCH_UP_TO`] islands): `attempts` times, the order and rule
+/// that packed last (at first, the first of [`best_shapes`]' attempts that packs `best`'s
+/// scale) with two islands at most three places apart swapped (and, one time in four, another
+/// placement rule) is packed at [`SEARCH_STEP`] above the current scale; when it fits, it
+/// becomes the current packing, order and rule. Why: the bisection stops at the largest scale one of five fixed attempts packs, and
 /// a greedy placement's success is sensitive to the order of the large islands in ways no
 /// fixed order serves for every mesh. Deterministic: the swaps come from a fixed-seed LCG.
 fn search_orders(
