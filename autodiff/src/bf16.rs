@@ -338,7 +338,7 @@ unsafe fn pack_right_rows(rows: &mut [u32], b: MatRef<'_>, q0: usize, np: usize)
 /// `(A[r][2q], A[r][2q + 1])`), zeros in the padding. Packed in one pass over `A`'s memory
 /// (blocks of inner pairs in parallel), where packing 32 rows at a time would read all of it
 /// with a stride per row; or by the caller, one block of `Aᵀ`'s rows at a time while it computes
-/// them ([`PackedLeft::for_transpose`], [`pack_transposed_block`]): a layer's forward packs the
+/// them ([`PackedLeft::for_transpose`], [`gemm_bf16_single_thread_packing_xt`]): a layer's forward packs the
 /// `xᵀ` of its weight gradient that way.
 pub(crate) struct PackedLeft {
     data: Words,
@@ -365,7 +365,8 @@ impl PackedLeft {
     }
 
     /// Room for the `m × k` factor `A` in `words` (any contents: every word is written when each
-    /// block of [`PackedLeft::transpose_blocks`] is packed by [`pack_transposed_block`]).
+    /// block of [`PackedLeft::transpose_blocks`] is packed by
+    /// [`gemm_bf16_single_thread_packing_xt`]).
     ///
     /// # Panics
     /// When [`bf16_matmul_available`] is false.
@@ -382,7 +383,7 @@ impl PackedLeft {
 
     /// The words of each block of `rows` rows of `Aᵀ` (inner indices of `A`) in turn, the last
     /// block's padding included: as many blocks as `k.div_ceil(rows)`, each with the tile count
-    /// [`pack_transposed_block`] needs.
+    /// [`gemm_bf16_single_thread_packing_xt`] needs.
     ///
     /// # Panics
     /// When `rows` is not a positive multiple of [`INNER`].
@@ -418,24 +419,6 @@ unsafe fn pack_transposed_tiles(tiles: &mut [u32], at: MatRef<'_>, i0: usize, ro
             }
         }
     }
-}
-
-/// Packs the row-major rows `block` of `Aᵀ` into `words`, the block of
-/// [`PackedLeft::transpose_blocks`] that holds them (with its `row_tiles`).
-///
-/// # Panics
-/// When `block` is not row-major or `words` is not such a block for it.
-pub(crate) fn pack_transposed_block(words: &mut [u32], row_tiles: usize, block: MatRef<'_>) {
-    assert!(bf16_matmul_available(), "packing on a machine without AMX bf16");
-    assert_eq!(block.col_stride, 1, "pack_transposed_block packs row-major rows");
-    assert!(
-        block.cols.next_multiple_of(BLOCK) / 16 == row_tiles
-            && words.len().is_multiple_of(256 * row_tiles)
-            && words.len() / (256 * row_tiles) * INNER >= block.rows,
-        "words of another block"
-    );
-    // SAFETY: AVX-512F is present where AMX is (asserted above).
-    unsafe { pack_transposed_tiles(words, block, 0, row_tiles) };
 }
 
 impl Drop for PackedLeft {
@@ -518,7 +501,7 @@ pub(crate) fn gemm_bf16_single_thread(dst: &mut [f32], a: MatRef<'_>, b: &Packed
 /// (`xᵀ·dz`, the weight gradient of the layer whose input `a` is): into `xt`, the block of
 /// [`PackedLeft::transpose_blocks`] holding `a`'s rows, with its `row_tiles`. Each 32 rows'
 /// pairs come from the block of bf16 pairs just packed for this product, still in L1, not
-/// from `a` again (the same words as [`pack_transposed_block`] on `a`).
+/// from `a` again (the same words as [`PackedLeft`] packed whole from `aᵀ`).
 ///
 /// # Panics
 /// As [`gemm_bf16_single_thread`], and when `xt` is not such a block for `a`.
@@ -983,8 +966,9 @@ mod tests {
         assert_eq!(single, whole);
     }
 
-    /// `xᵀ` packed block by block from `x`'s rows (as a layer's forward packs it, into a buffer
-    /// holding stale words) is the factor packed whole from `xᵀ`, and gives the same product.
+    /// `xᵀ` packed block by block while `x·W` is multiplied (as a layer's forward packs it, into
+    /// a buffer of stale words) is the factor packed whole from `xᵀ` and gives the same product;
+    /// the product `x·W` is unchanged by the packing beside it.
     #[test]
     fn xt_packed_by_row_blocks_is_xt_packed_whole() {
         if !bf16_matmul_available() {
@@ -992,16 +976,22 @@ mod tests {
             return;
         }
         for &(rows, cols, n, block) in &[(1100, 40, 24, 256), (300, 100, 33, 64), (64, 33, 16, 32)] {
-            let (x, dz) = (lcg(6, rows * cols, 2.0), lcg(7, rows * n, 2.0));
+            let (x, dz, w) = (lcg(6, rows * cols, 2.0), lcg(7, rows * n, 2.0), lcg(8, cols * n, 2.0));
             let xv = MatRef::new(&x, Shape::new(rows, cols));
             let dz = PackedRight::new(MatRef::new(&dz, Shape::new(rows, n)));
+            let w = PackedRight::new(MatRef::new(&w, Shape::new(cols, n)));
             let mut stale = LineBuf::zeroed(PackedLeft::words(cols, rows));
             stale.fill(0x7fc0_7fc0); // bf16 NaNs: a word left unwritten would poison a product
             let mut by_blocks = PackedLeft::for_transpose(cols, rows, stale);
+            let (mut xw, mut xw_alone) = (vec![0.0; rows * n], vec![0.0; rows * n]);
             let starts = (0..rows).step_by(block);
             for ((words, row_tiles), start) in by_blocks.transpose_blocks(block).zip(starts) {
-                pack_transposed_block(words, row_tiles, xv.row_range(start, block.min(rows - start)));
+                let r = block.min(rows - start);
+                let dst = &mut xw[start * n..(start + r) * n];
+                gemm_bf16_single_thread_packing_xt(dst, xv.row_range(start, r), &w, false, words, row_tiles);
             }
+            gemm_bf16(&mut xw_alone, xv, &w, false);
+            assert_eq!(xw, xw_alone, "{rows}×{cols}: the product changed");
             // SAFETY: AVX-512F is present where AMX is.
             let whole = unsafe { PackedLeft::new(xv.t(), rows.next_multiple_of(INNER)) };
             assert!(by_blocks.data[..] == whole.data[..], "{rows}×{cols} in blocks of {block}");

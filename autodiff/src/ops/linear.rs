@@ -26,8 +26,7 @@ use rayon::prelude::*;
 
 use crate::bf16::{
     MatmulPrecision, PackedLeft, PackedRight, gemm_bf16, gemm_bf16_packed_left, gemm_bf16_single_thread,
-    gemm_bf16_single_thread_packing_xt, pack_right_block, pack_transposed_block, packs_left_whole,
-    tiles_take,
+    gemm_bf16_single_thread_packing_xt, pack_right_block, packs_left_whole, tiles_take,
 };
 use crate::kernels::{self, MatRef, ROW_BLOCK, gemm, gemm_single_thread};
 use crate::shape::Shape;
@@ -123,12 +122,10 @@ impl Tape {
                 (Right::Bf16(w), Some((words, row_tiles))) => {
                     gemm_bf16_single_thread_packing_xt(block, x_block, w, false, words, *row_tiles)
                 }
-                (_, xt_block) => {
-                    right.product(block, x_block, false);
-                    if let Some((words, row_tiles)) = xt_block {
-                        pack_transposed_block(words, *row_tiles, x_block);
-                    }
+                (Right::F32(_), Some(_)) => {
+                    unreachable!("xᵀ is packed only where W's product runs on the tiles (over 32 inputs)")
                 }
+                (_, None) => right.product(block, x_block, false),
             }
             for row in block.chunks_exact_mut(shape.cols) {
                 match bias {
