@@ -447,14 +447,17 @@ fn spare_words(len: usize) -> Words {
 
 /// The spare buffer that best holds `len` words (module docs of [`spare_words`]), or a new one.
 fn spare_buffer(len: usize) -> Words {
-    SPARE
-        .with_borrow_mut(|spare| {
-            // The smallest that holds `len`, else the largest (grown): a large buffer taken for
-            // a small factor would leave the next large one to fresh pages.
-            let by_capacity = |&i: &usize| spare[i].capacity();
-            let fits = (0..spare.len()).filter(|&i| spare[i].capacity() >= len).min_by_key(by_capacity);
-            fits.or_else(|| (0..spare.len()).max_by_key(by_capacity)).map(|i| spare.swap_remove(i))
-        })
+    SPARE.with_borrow_mut(|spare| take_best_fit(spare, len))
+}
+
+/// Takes from `spare` the buffer that best holds `len` words: the smallest that holds them,
+/// else the largest (to be grown), else a new one. Why not any: a large buffer taken for a
+/// small factor would leave the next large one to fresh pages.
+pub(crate) fn take_best_fit(spare: &mut Vec<Words>, len: usize) -> Words {
+    let by_capacity = |&i: &usize| spare[i].capacity();
+    let fits = (0..spare.len()).filter(|&i| spare[i].capacity() >= len).min_by_key(by_capacity);
+    fits.or_else(|| (0..spare.len()).max_by_key(by_capacity))
+        .map(|i| spare.swap_remove(i))
         .unwrap_or_default()
 }
 

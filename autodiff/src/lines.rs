@@ -41,8 +41,7 @@ impl<T: Copy + Default> LineBuf<T> {
     /// Makes the buffer `len` default (zero) elements, reusing its allocation.
     pub(crate) fn set_zeroed(&mut self, len: usize) {
         self.lines.clear();
-        self.lines.resize(len.div_ceil(16), Line([T::default(); 16]));
-        self.len = len;
+        self.set_len(len);
     }
 
     /// Makes the buffer `len` elements, reusing its allocation and keeping what it holds: the

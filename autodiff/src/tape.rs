@@ -7,7 +7,7 @@
 //! Shape errors and use of a stale [`Var`] are programming errors and panic with a message that names
 //! the op and the shapes; user input never reaches the tape unvalidated.
 
-use crate::bf16::{MatmulPrecision, PackedLeft, Words};
+use crate::bf16::{MatmulPrecision, PackedLeft, Words, take_best_fit};
 use crate::ops::Op;
 use crate::params::{ParamId, ParamStore};
 use crate::pool::{Buf, Pool};
@@ -314,12 +314,7 @@ impl Tape {
     /// A buffer for a factor of `len` words packed in the forward ([`Tape::packed`]): the
     /// smallest spare one that holds them, else the largest, else a new one.
     pub(crate) fn packed_words(&mut self, len: usize) -> Words {
-        let spare = &mut self.packed_spare;
-        let by_capacity = |&i: &usize| spare[i].capacity();
-        let fits = (0..spare.len()).filter(|&i| spare[i].capacity() >= len).min_by_key(by_capacity);
-        fits.or_else(|| (0..spare.len()).max_by_key(by_capacity))
-            .map(|i| spare.swap_remove(i))
-            .unwrap_or_default()
+        take_best_fit(&mut self.packed_spare, len)
     }
 
     /// Keeps a factor packed in the forward for the backward; its index for the op to record.
