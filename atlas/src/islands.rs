@@ -740,25 +740,29 @@ fn best_shapes(
 ) -> Option<(f64, Vec<ShapePlaced>)> {
     let orders = ShapeOrders::of(islands);
     let trial = |scale: f64| orders.pack(islands, scale, res, gutter, rotate);
-    let mut best = (from, trial(from)?);
+    // The scale, its packing, and which of the attempts made it.
+    let (attempt, placed) = trial(from)?;
+    let mut best = (from, placed, attempt);
     // Every face area at once cannot exceed the square: the scale at which it would fill it.
     let area: f64 = islands.iter().filter(|i| !i.degenerate).map(|i| i.area_3d).sum();
     if area <= 0.0 {
-        return Some(best);
+        return Some((best.0, best.1));
     }
     let mut hi = 1.0 / area.sqrt();
     let mut lo = from;
     while hi - lo > SHAPE_SCALE_PRECISION * hi {
         let mid = 0.5 * (lo + hi);
         match trial(mid) {
-            Some(p) => {
+            Some((attempt, p)) => {
                 lo = mid;
-                best = (mid, p);
+                best = (mid, p, attempt);
             }
             None => hi = mid,
         }
     }
-    Some(search_orders(islands, res, gutter, rotate, &orders, best, search))
+    let (scale, placed, attempt) = best;
+    let (rule, order) = orders.attempts[attempt].clone();
+    Some(search_orders(islands, res, gutter, rotate, (scale, placed), rule, order, search))
 }
 
 /// Packing attempts of the order search ([`search_orders`]) in `nuvo unwrap`'s final layout.
@@ -777,19 +781,21 @@ pub const SEARCH_UP_TO: usize = 64;
 
 /// The shape packing `best` (scale, placement) of [`best_shapes`], improved by a search over
 /// island orders (for 2 to [`SEARCH_UP_TO`] islands): `attempts` times, the order and rule
-/// that packed last (at first, the first of [`best_shapes`]' attempts that packs `best`'s
-/// scale) with two islands at most three places apart swapped (and, one time in four, another
+/// that packed last (at first, `rule` and `order`: the attempt of [`best_shapes`] that packed
+/// `best`) with two islands at most three places apart swapped (and, one time in four, another
 /// placement rule) is packed at [`SEARCH_STEP`] above the current scale; when it fits, it
 /// becomes the current packing, order and rule. Why: the bisection stops at the largest scale one of five fixed attempts packs, and
 /// a greedy placement's success is sensitive to the order of the large islands in ways no
 /// fixed order serves for every mesh. Deterministic: the swaps come from a fixed-seed LCG.
+#[allow(clippy::too_many_arguments)]
 fn search_orders(
     islands: &[Island],
     res: u32,
     gutter: u32,
     rotate: bool,
-    orders: &ShapeOrders,
     best: (f64, Vec<ShapePlaced>),
+    mut rule: Rule,
+    mut order: Vec<usize>,
     attempts: usize,
 ) -> (f64, Vec<ShapePlaced>) {
     if attempts == 0 || islands.len() < 2 || islands.len() > SEARCH_UP_TO {
@@ -797,15 +803,6 @@ fn search_orders(
     }
     let footprints =
         |scale: f64| shapes::footprints(islands, |i: &Island| i.texels_per_unit(scale, res), rotate);
-    let fps = footprints(best.0);
-    let Some((mut rule, mut order)) = orders
-        .attempts
-        .iter()
-        .find(|(r, o)| shapes::pack_shapes(&fps, o, res, gutter, *r).is_some())
-        .cloned()
-    else {
-        return best; // `best` came from `from`'s rectangle scale, which no attempt packs
-    };
     let mut best = best;
     let mut state = 0x9e37_79b9_7f4a_7c15u64;
     let mut draw = |n: usize| {
@@ -855,7 +852,7 @@ impl ShapeOrders {
         ShapeOrders { attempts }
     }
 
-    /// The islands' shapes packed at `scale` by the first attempt that fits them.
+    /// The islands' shapes packed at `scale` by the first attempt that fits them, with its index.
     fn pack(
         &self,
         islands: &[Island],
@@ -863,9 +860,11 @@ impl ShapeOrders {
         res: u32,
         gutter: u32,
         rotate: bool,
-    ) -> Option<Vec<ShapePlaced>> {
+    ) -> Option<(usize, Vec<ShapePlaced>)> {
         let fps = shapes::footprints(islands, |i: &Island| i.texels_per_unit(scale, res), rotate);
-        self.attempts.iter().find_map(|(rule, order)| shapes::pack_shapes(&fps, order, res, gutter, *rule))
+        self.attempts.iter().enumerate().find_map(|(k, (rule, order))| {
+            shapes::pack_shapes(&fps, order, res, gutter, *rule).map(|p| (k, p))
+        })
     }
 }
 
