@@ -305,6 +305,20 @@ pub struct OutputConfig {
     /// and area distortion as the symmetric Dirichlet energy does, a larger weight keeps angles
     /// (PartUV's angular score) at the cost of area.
     pub injective_conformal: f64,
+    /// With `injective`: the weight of the shear term SLIM minimises with the symmetric
+    /// Dirichlet energy, `cos²` of the angle the texture axes `∂p/∂u` and `∂p/∂v` make on the
+    /// surface (`nuvo_atlas::injective::InjectiveOptions::orthogonal`). Unlike the conformal
+    /// term it leaves stretch along the texture axes free, so the axes stay perpendicular (what
+    /// PartUV's angular score and the paper's Conformal metric measure) at less cost in area.
+    /// 0 (off) by default; `nuvo unwrap` and `configs/bunny.toml` set
+    /// `nuvo_atlas::injective::UNWRAP_ORTHOGONAL`.
+    pub injective_orthogonal: f64,
+    /// With `injective`: the weight of the area term SLIM minimises with the symmetric Dirichlet
+    /// energy, `(det J − 1)²` (`nuvo_atlas::injective::InjectiveOptions::equiareal`): every face
+    /// kept at its island's texel density (what Stretch and the area distortions measure). 0
+    /// (off) by default; `nuvo unwrap` and `configs/bunny.toml` set
+    /// `nuvo_atlas::injective::UNWRAP_EQUIAREAL`.
+    pub injective_equiareal: f64,
     /// With `injective`: cut each solved island open from its cone points (where the surface
     /// gathers an angle deficit that no flat map holds without distortion) to its boundary, and
     /// keep the cuts where SLIM then lowers the island's distortion enough (not in the paper;
@@ -376,6 +390,8 @@ impl Default for OutputConfig {
             injective: false,
             injective_split_energy: nuvo_atlas::injective::SPLIT_ENERGY,
             injective_conformal: 0.0,
+            injective_orthogonal: 0.0,
+            injective_equiareal: 0.0,
             join: false,
             crease_charts: false,
             cut_necks: false,
@@ -866,8 +882,14 @@ impl OutputConfig {
                 "must be a positive energy per unit area (4 is an isometry) or inf (never split)",
             ));
         }
-        if !(out.injective_conformal.is_finite() && out.injective_conformal >= 0.0) {
-            return Err(src.invalid("output.injective_conformal", "must be 0 (off) or a positive weight"));
+        for (key, weight) in [
+            ("output.injective_conformal", out.injective_conformal),
+            ("output.injective_orthogonal", out.injective_orthogonal),
+            ("output.injective_equiareal", out.injective_equiareal),
+        ] {
+            if !(weight.is_finite() && weight >= 0.0) {
+                return Err(src.invalid(key, "must be 0 (off) or a positive weight"));
+            }
         }
         if out.gutter.saturating_mul(4) >= out.atlas_resolution {
             return Err(
@@ -1011,13 +1033,21 @@ mod tests {
     }
 
     #[test]
-    fn injective_conformal_is_off_by_default_and_checked() {
+    fn slim_term_weights_are_off_by_default_and_checked() {
         let out = |extra: &str| from_str("c.toml", &format!("{MINIMAL}[output]\n{extra}"));
-        assert_eq!(out("").unwrap().config.output.injective_conformal, 0.0);
-        assert_eq!(out("injective_conformal = 2.0\n").unwrap().config.output.injective_conformal, 2.0);
-        for bad in ["-1.0", "nan", "inf"] {
-            let e = out(&format!("injective_conformal = {bad}\n")).unwrap_err();
-            assert!(e.to_string().contains("output.injective_conformal"), "{bad}: {e}");
+        let weights =
+            |o: &OutputConfig| [o.injective_conformal, o.injective_orthogonal, o.injective_equiareal];
+        assert_eq!(weights(&out("").unwrap().config.output), [0.0; 3]);
+        for (k, key) in
+            ["injective_conformal", "injective_orthogonal", "injective_equiareal"].iter().enumerate()
+        {
+            let mut want = [0.0; 3];
+            want[k] = 2.0;
+            assert_eq!(weights(&out(&format!("{key} = 2.0\n")).unwrap().config.output), want, "{key}");
+            for bad in ["-1.0", "nan", "inf"] {
+                let e = out(&format!("{key} = {bad}\n")).unwrap_err();
+                assert!(e.to_string().contains(&format!("output.{key}")), "{key} = {bad}: {e}");
+            }
         }
     }
 

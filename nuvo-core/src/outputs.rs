@@ -263,6 +263,8 @@ fn injective_options(opts: &OutputConfig) -> InjectiveOptions {
         split,
         split_energy: opts.injective_split_energy,
         conformal: opts.injective_conformal,
+        orthogonal: opts.injective_orthogonal,
+        equiareal: opts.injective_equiareal,
         ..Default::default()
     }
 }
