@@ -399,6 +399,7 @@ COLUMNS = [  # (key, md header, md format)
     ("angular", "angular ↑", "{:.3f}"),
     ("area_distortion", "area dist. ↓", "{:.3f}"),
     ("overall_area_distortion", "overall area ↓", "{:.3f}"),
+    ("texel_aspect", "texel aspect ↓", "{:.3f}"),
     ("packing_efficiency", "packing eff. ↑", "{:.3f}"),
     ("boundary", "Boundary ↑", "{:.4f}"),
     ("stretch", "Stretch ↑", "{:.4f}"),
@@ -408,7 +409,7 @@ COLUMNS = [  # (key, md header, md format)
     ("overlapping_faces", "overlapping faces", "{:d}"),
 ]
 CSV_EXTRA = ["input", "note", "reason", "proxy", "charts_source", "uv_charts", "charts_reported_by_xatlas",
-             "utilisation", "xatlas_seconds_with_io", "process_wall_seconds", "eval_seconds",
+             "utilisation", "texel_aspect_p90", "xatlas_seconds_with_io", "process_wall_seconds", "eval_seconds",
              "eval_views", "eval_resolution", "bake_faces", "bake_flipped_faces", "bake_overlapping_faces",
              "cpu_seconds", "other_cpu_share", "load_before", "nuvo_built", "finished"]
 
@@ -455,6 +456,8 @@ def metrics_row(m):
         "flipped_faces": _num(uv.get("flipped_faces"), True),
         "overlapping_faces": _num(uv.get("overlapping_faces"), True),
         "utilisation": _num(uv.get("utilisation")),
+        "texel_aspect": _num(uv.get("texel_aspect_median")),
+        "texel_aspect_p90": _num(uv.get("texel_aspect_p90")),
         "eval_views": _num(_get(m, "options", "views"), True),
         "eval_resolution": _num(_get(m, "options", "resolution"), True),
     }

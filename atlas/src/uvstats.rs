@@ -24,6 +24,14 @@
 //! - **Overlap fraction**: texels covered by ≥ 2 faces / covered texels. A face *overlaps* when at
 //!   least one of its texels is covered by another face. Faces smaller than a texel may escape
 //!   detection: that is the resolution of the measure.
+//! - **Texel aspect** of a face: the ratio `σ₁/σ₂ ≥ 1` of the larger to the smaller singular
+//!   value of its affine map between the surface and UV space, i.e. how far a square texel's
+//!   footprint on the surface is from a square (1: square, 2: twice as long one way as the
+//!   other, whichever way). Neither the paper's Stretch and Conformal nor PartUV's angular and
+//!   area scores see it when the stretch runs along the texture axes. Over the faces that are
+//!   degenerate neither in 3-D nor in UV, unweighted: the median (the mean of the two middle
+//!   values for an even count) and the 90th percentile (the value at rank `⌈0.9 n⌉`); 1 for
+//!   both when no face is measurable.
 
 use std::collections::HashMap;
 
@@ -68,6 +76,10 @@ pub struct UvStats {
     pub degenerate_uv_faces: usize,
     /// Faces of (near) zero 3-D area.
     pub degenerate_3d_faces: usize,
+    /// Median texel aspect over the measurable faces (module docs; 1 = square texels).
+    pub texel_aspect_median: f64,
+    /// 90th percentile of the texel aspect over the measurable faces (module docs).
+    pub texel_aspect_p90: f64,
     /// Side of the UV raster used for utilisation and overlap.
     pub raster_resolution: u32,
 }
@@ -127,6 +139,17 @@ pub fn analyse_uv(
     let covered = counts.iter().filter(|&&c| c >= 1).count();
     let multiple = counts.iter().filter(|&&c| c >= 2).count();
     let faces = mesh.triangles.len();
+    let degenerate_3d = degenerate_3d_faces(mesh);
+    let mut aspects: Vec<f64> = (0..faces)
+        .into_par_iter()
+        .filter(|&f| !degenerate_3d[f] && !is_degenerate_uv(area2[f]))
+        .filter_map(|f| {
+            let [a, b, c] = mesh.corners(f).map(to_dvec3);
+            let [ua, ub, uc] = uv.triangles[f].map(|i| uv.coords[i as usize].map(|x| x as f64));
+            texel_aspect(b - a, c - a, [ub[0] - ua[0], ub[1] - ua[1], uc[0] - ua[0], uc[1] - ua[1]])
+        })
+        .collect();
+    let (texel_aspect_median, texel_aspect_p90) = median_and_p90(&mut aspects);
     let stats = UvStats {
         faces,
         charts,
@@ -137,10 +160,41 @@ pub fn analyse_uv(
         flipped_fraction: if faces == 0 { 0.0 } else { flipped.len() as f64 / faces as f64 },
         flipped_on_creases,
         degenerate_uv_faces: degenerate_uv.len(),
-        degenerate_3d_faces: degenerate_3d_faces(mesh).iter().filter(|&&d| d).count(),
+        degenerate_3d_faces: degenerate_3d.iter().filter(|&&d| d).count(),
+        texel_aspect_median,
+        texel_aspect_p90,
         raster_resolution: resolution,
     };
     Ok(UvAnalysis { stats, face_chart, flipped, overlapping, degenerate_uv })
+}
+
+/// The texel aspect `σ₁/σ₂` of a face (module docs) with 3-D edges `e1 = b − a`, `e2 = c − a`
+/// and UV edges `duv = [Δu₁, Δv₁, Δu₂, Δv₂]`; `None` when the map has no finite ratio.
+fn texel_aspect(e1: DVec3, e2: DVec3, duv: [f64; 4]) -> Option<f64> {
+    let [du1, dv1, du2, dv2] = duv;
+    // The texture axes ∂p/∂u and ∂p/∂v times the UV determinant, which the ratio ignores; the
+    // squared singular values are the eigenvalues of their Gram matrix [[a, b], [b, c]].
+    let t = e1 * dv2 - e2 * dv1;
+    let s = e2 * du1 - e1 * du2;
+    let (a, b, c) = (t.length_squared(), t.dot(s), s.length_squared());
+    let mean = 0.5 * (a + c);
+    let spread = (0.25 * (a - c) * (a - c) + b * b).sqrt();
+    let (hi, lo) = (mean + spread, mean - spread);
+    let ratio = (hi / lo).sqrt();
+    (lo > 0.0 && ratio.is_finite()).then_some(ratio)
+}
+
+/// The median (the mean of the two middle values for an even count) and the 90th percentile
+/// (rank `⌈0.9 n⌉`) of `v`, reordering it; `(1, 1)` when it is empty.
+fn median_and_p90(v: &mut [f64]) -> (f64, f64) {
+    let n = v.len();
+    if n == 0 {
+        return (1.0, 1.0);
+    }
+    v.sort_unstable_by(f64::total_cmp);
+    let median = if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) };
+    let rank = (9 * n).div_ceil(10);
+    (median, v[rank - 1])
 }
 
 /// UV-connected components of the faces (module docs): `(chart of each face, number of charts)`,
@@ -420,6 +474,36 @@ mod tests {
         assert_eq!(a.stats.overlapping_faces, 0);
         assert_eq!(a.stats.flipped_faces, 0);
         assert_eq!(a.stats.degenerate_uv_faces, 0);
+    }
+
+    /// Square texels measure 1 whatever the map's scale and turn; a map twice as long along u as
+    /// along v measures 2; a shear measures its singular values' ratio; a texel aspect's median
+    /// and 90th percentile see how many faces are stretched.
+    #[test]
+    fn the_texel_aspect_is_the_ratio_of_the_maps_singular_values() {
+        let aspect = |map: fn([f32; 3]) -> [f32; 2]| {
+            let s = analyse_uv(&grid(4, map), None, 64).unwrap().stats;
+            (s.texel_aspect_median, s.texel_aspect_p90)
+        };
+        let (m, p) =
+            aspect(|p| [0.3 + 0.2 * (0.6 * p[0] - 0.8 * p[1]), 0.4 + 0.2 * (0.8 * p[0] + 0.6 * p[1])]);
+        assert!((m - 1.0).abs() < 1e-5 && (p - 1.0).abs() < 1e-5, "{m} {p}");
+        let (m, p) = aspect(|p| [0.5 + 0.4 * p[0], 0.5 + 0.2 * p[1]]);
+        assert!((m - 2.0).abs() < 1e-5 && (p - 2.0).abs() < 1e-5, "{m} {p}");
+        // u = x + y/2, v = y: JᵀJ = [[1, ½], [½, 5/4]] has eigenvalues (9 ± √17) / 8, so
+        // σ₁/σ₂ = ((9 + √17) / (9 − √17))^½.
+        let (m, _) = aspect(|p| [0.2 + 0.2 * (p[0] + 0.5 * p[1]), 0.5 + 0.2 * p[1]]);
+        let want = ((9.0 + 17f64.sqrt()) / (9.0 - 17f64.sqrt())).sqrt();
+        assert!((m - want).abs() < 1e-4, "{m} against {want}");
+        // One face in eight stretched 3× (its corners' UVs apart from the rest): the median stays
+        // 1 and the 90th percentile does not (rank 29 of 32 is past the 28 square faces).
+        let base = grid(4, |p| [0.5 + 0.1 * p[0], 0.5 + 0.1 * p[1]]);
+        let stretched = crate::testmesh::with_uv_per_corner(&base, |f, _, uv| {
+            if f % 8 == 0 { [0.5 + 3.0 * (uv[0] - 0.5), uv[1]] } else { uv }
+        });
+        let s = analyse_uv(&stretched, None, 64).unwrap().stats;
+        assert!((s.texel_aspect_median - 1.0).abs() < 1e-5, "{s:?}");
+        assert!((s.texel_aspect_p90 - 3.0).abs() < 1e-4, "{s:?}");
     }
 
     #[test]

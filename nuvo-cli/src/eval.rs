@@ -86,7 +86,7 @@ pub fn table(r: &EvalReport) -> String {
         o.resolution,
         o.seed
     );
-    let rows: [(&str, String); 11] = [
+    let rows: [(&str, String); 12] = [
         ("Boundary", format!("{:.4}", m.boundary)),
         ("Stretch", format!("{:.4}", m.stretch)),
         ("Conformal", format!("{:.4}", m.conformal)),
@@ -98,6 +98,13 @@ pub fn table(r: &EvalReport) -> String {
         ("  on mesh creases", format!("{} of them (the surface turns back there)", uv.flipped_on_creases)),
         ("degenerate UV faces", uv.degenerate_uv_faces.to_string()),
         ("degenerate 3-D faces", uv.degenerate_3d_faces.to_string()),
+        (
+            "texel aspect",
+            format!(
+                "median {:.3}, 90th percentile {:.3} (1 = square texels on the surface)",
+                uv.texel_aspect_median, uv.texel_aspect_p90
+            ),
+        ),
     ];
     for (name, value) in rows {
         s += &format!("  {name:<22}{value}\n");
