@@ -304,10 +304,8 @@ fn face_distortion(mesh: &TriMesh, uv: &UvLayer) -> Vec<Option<[f32; 2]>> {
 /// one degenerate in 3-D along a UV axis). The one formula of Conformal here and of the angular
 /// score in [`crate::partuv`].
 pub(crate) fn abs_cos_tangents(e1: DVec3, e2: DVec3, duv: [f64; 4]) -> Option<f64> {
-    let [du1, dv1, du2, dv2] = duv;
     // T, B up to the common factor 1/det, which |cos| ignores.
-    let t = e1 * dv2 - e2 * dv1;
-    let bt = e2 * du1 - e1 * du2;
+    let (t, bt) = crate::uvstats::texture_axes(e1, e2, duv);
     let den = t.length() * bt.length();
     (den > 0.0).then(|| (t.dot(bt) / den).abs().min(1.0))
 }

@@ -171,17 +171,24 @@ pub fn analyse_uv(
 /// The texel aspect `σ₁/σ₂` of a face (module docs) with 3-D edges `e1 = b − a`, `e2 = c − a`
 /// and UV edges `duv = [Δu₁, Δv₁, Δu₂, Δv₂]`; `None` when the map has no finite ratio.
 fn texel_aspect(e1: DVec3, e2: DVec3, duv: [f64; 4]) -> Option<f64> {
-    let [du1, dv1, du2, dv2] = duv;
-    // The texture axes ∂p/∂u and ∂p/∂v times the UV determinant, which the ratio ignores; the
-    // squared singular values are the eigenvalues of their Gram matrix [[a, b], [b, c]].
-    let t = e1 * dv2 - e2 * dv1;
-    let s = e2 * du1 - e1 * du2;
+    // The squared singular values are the eigenvalues of the axes' Gram matrix [[a, b], [b, c]];
+    // the UV determinant the axes are scaled by cancels in the ratio.
+    let (t, s) = texture_axes(e1, e2, duv);
     let (a, b, c) = (t.length_squared(), t.dot(s), s.length_squared());
     let mean = 0.5 * (a + c);
     let spread = (0.25 * (a - c) * (a - c) + b * b).sqrt();
     let (hi, lo) = (mean + spread, mean - spread);
     let ratio = (hi / lo).sqrt();
     (lo > 0.0 && ratio.is_finite()).then_some(ratio)
+}
+
+/// A face's texture axes `∂p/∂u` and `∂p/∂v` times its UV determinant `Δu₁Δv₂ − Δv₁Δu₂`, from
+/// its 3-D edges `e1 = b − a`, `e2 = c − a` and UV edges `duv = [Δu₁, Δv₁, Δu₂, Δv₂]`: the
+/// columns of the inverse of the UV edge matrix applied to the 3-D edges, without the division
+/// (what a scale-free measure of the axes reads).
+pub(crate) fn texture_axes(e1: DVec3, e2: DVec3, duv: [f64; 4]) -> (DVec3, DVec3) {
+    let [du1, dv1, du2, dv2] = duv;
+    (e1 * dv2 - e2 * dv1, e2 * du1 - e1 * du2)
 }
 
 /// The median (the mean of the two middle values for an even count) and the 90th percentile
