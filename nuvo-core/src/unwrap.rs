@@ -273,8 +273,10 @@ pub fn recipe(r: &RecipeInput) -> String {
     // SLIM keeps each face's texture axes perpendicular on the surface and the face at its
     // island's texel density, the two things the renders and PartUV's scores measure, and lets
     // the stretch left go along the axes (Common Shapes: Editability 0.9594 -> 0.9721, angular
-    // 0.955 -> 0.982, worst-chart area 1.148 -> 1.065, for a median anisotropy 1.05 -> 1.09;
-    // BENCHMARKS.md, "Texture axes kept perpendicular and faces at their island's density").
+    // 0.955 -> 0.982, worst-chart area 1.148 -> 1.065, no mesh lower; unruly inputs 0.841 ->
+    // 0.868; for a texel aspect of 1.05 -> 1.09 on the median face, 1.21 -> 1.43 at the 90th
+    // percentile; BENCHMARKS.md, "Texture axes kept perpendicular and faces at their island's
+    // density").
     bake += &format!(
         "injective_orthogonal = {:?}\ninjective_equiareal = {:?}\n",
         nuvo_atlas::injective::UNWRAP_ORTHOGONAL,
