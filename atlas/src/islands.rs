@@ -470,8 +470,7 @@ fn face_metric(p: [DVec3; 3], t: [[f32; 2]; 3]) -> Option<[f64; 3]> {
     if det.abs() <= 1e-6 * (du1 * du1 + dv1 * dv1 + du2 * du2 + dv2 * dv2) {
         return None;
     }
-    let tt = e1 * dv2 - e2 * dv1;
-    let bt = e2 * du1 - e1 * du2;
+    let (tt, bt) = crate::uvstats::texture_axes(e1, e2, [du1, dv1, du2, dv2]);
     let g = [tt.dot(tt), tt.dot(bt), bt.dot(bt)];
     (g[0] > 0.0 && g[2] > 0.0 && g.iter().all(|x| x.is_finite())).then_some(g)
 }
@@ -761,8 +760,8 @@ fn best_shapes(
         }
     }
     let (scale, placed, attempt) = best;
-    let (rule, order) = orders.attempts[attempt].clone();
-    Some(search_orders(islands, res, gutter, rotate, (scale, placed), rule, order, search))
+    let start = orders.attempts[attempt].clone();
+    Some(search_orders(islands, res, gutter, rotate, (scale, placed), start, search))
 }
 
 /// Packing attempts of the order search ([`search_orders`]) in `nuvo unwrap`'s final layout.
@@ -780,24 +779,24 @@ pub const SEARCH_STEP: f64 = 0.01;
 pub const SEARCH_UP_TO: usize = 64;
 
 /// The shape packing `best` (scale, placement) of [`best_shapes`], improved by a search over
-/// island orders (for 2 to [`SEARCH_UP_TO`] islands): `attempts` times, the order and rule
-/// that packed last (at first, `rule` and `order`: the attempt of [`best_shapes`] that packed
-/// `best`) with two islands at most three places apart swapped (and, one time in four, another
-/// placement rule) is packed at [`SEARCH_STEP`] above the current scale; when it fits, it
-/// becomes the current packing, order and rule. Why: the bisection stops at the largest scale one of five fixed attempts packs, and
-/// a greedy placement's success is sensitive to the order of the large islands in ways no
-/// fixed order serves for every mesh. Deterministic: the swaps come from a fixed-seed LCG.
-#[allow(clippy::too_many_arguments)]
+/// island orders (for 2 to [`SEARCH_UP_TO`] islands): `attempts` times, the rule and order
+/// that packed last (at first, `start`: the attempt of [`best_shapes`] that packed `best`) with
+/// two islands at most three places apart swapped (and, one time in four, another placement
+/// rule) is packed at [`SEARCH_STEP`] above the current scale; when it fits, it becomes the
+/// current packing, rule and order. Why: the bisection stops at the largest scale one of five
+/// fixed attempts packs, and a greedy placement's success is sensitive to the order of the
+/// large islands in ways no fixed order serves for every mesh. Deterministic: the swaps come
+/// from a fixed-seed LCG.
 fn search_orders(
     islands: &[Island],
     res: u32,
     gutter: u32,
     rotate: bool,
     best: (f64, Vec<ShapePlaced>),
-    mut rule: Rule,
-    mut order: Vec<usize>,
+    start: (Rule, Vec<usize>),
     attempts: usize,
 ) -> (f64, Vec<ShapePlaced>) {
+    let (mut rule, mut order) = start;
     if attempts == 0 || islands.len() < 2 || islands.len() > SEARCH_UP_TO {
         return best;
     }
