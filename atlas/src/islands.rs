@@ -218,10 +218,23 @@ pub struct ScaleTest {
 impl ScaleTest {
     /// The islands of `mesh` for the atlas of `opts`. Errors as [`pack_islands`]'.
     pub fn new(mesh: &TriMesh, opts: &IslandPacking) -> Result<Self, AtlasError> {
+        Self::with_cache(mesh, opts, &mut IslandCache::default())
+    }
+
+    /// As [`ScaleTest::new`], taking every island that `cache` holds unchanged (same faces,
+    /// same texture coordinates) from it instead of preparing it again, and leaving in `cache`
+    /// the islands of `mesh`. The answers are those of [`ScaleTest::new`]. `cache` must only
+    /// ever see meshes with the same positions (the layouts of one mesh), which it checks by
+    /// each island's 3-D area.
+    pub fn with_cache(
+        mesh: &TriMesh,
+        opts: &IslandPacking,
+        cache: &mut IslandCache,
+    ) -> Result<Self, AtlasError> {
         let uv = require_uv(mesh)?;
         check_options(opts)?;
         let (island_of_face, n) = uv_charts(mesh, uv);
-        let layout = Layout::of(mesh, uv, &island_of_face, n, opts.rotate);
+        let layout = Layout::of_cached(mesh, uv, &island_of_face, n, opts.rotate, Some(cache));
         let orders = ShapeOrders::of(&layout.islands);
         Ok(ScaleTest { layout, orders, opts: *opts })
     }
@@ -243,6 +256,39 @@ impl ScaleTest {
         }
         islands.len() <= SHAPES_UP_TO && self.orders.pack(islands, scale, res, gutter, rotate).is_some()
     }
+}
+
+/// Islands prepared for packing (turned to their least shear, outlined), kept from one
+/// [`ScaleTest::with_cache`] to the next. Why: the necks pass tries dozens of cuts of one
+/// mesh, each a layout that differs from the last in one or two islands, and preparing every
+/// island again (above all the least-shear turn of every face) was 1.6 s of the horse's 3.8 s
+/// pass (BENCHMARKS.md, "More neck cuts"). An island is taken from the cache only when its
+/// faces, its texture coordinates (in its own numbering), its 3-D area and the `rotate` option
+/// are the same bits, so a hit gives the island that preparing it would. The cache holds the
+/// islands of the last layout only (a rejected trial's parts do not pile up).
+#[derive(Default)]
+pub struct IslandCache {
+    /// Keyed by the island's faces, in face order.
+    entries: HashMap<Vec<u32>, CachedIsland>,
+    /// Islands taken from the cache so far.
+    hits: usize,
+}
+
+impl IslandCache {
+    /// How many islands were taken from the cache instead of being prepared again.
+    pub fn hits(&self) -> usize {
+        self.hits
+    }
+}
+
+/// What [`IslandCache`] checks before it reuses an island, and the island.
+struct CachedIsland {
+    /// The island's texture coordinates before its turn, in its own numbering.
+    points: Vec<[f64; 2]>,
+    rotate: bool,
+    /// Whether its outline was sought (only in layouts of up to [`SHAPES_UP_TO`] islands).
+    outlined: bool,
+    island: Island,
 }
 
 /// The resolution and gutter are in range (errors name them).
@@ -274,6 +320,19 @@ struct Layout {
 
 impl Layout {
     fn of(mesh: &TriMesh, uv: &UvLayer, island_of_face: &[u32], n: usize, rotate: bool) -> Self {
+        Self::of_cached(mesh, uv, island_of_face, n, rotate, None)
+    }
+
+    /// [`Layout::of`], reusing the islands `cache` holds unchanged and leaving this layout's
+    /// islands in it ([`IslandCache`]).
+    fn of_cached(
+        mesh: &TriMesh,
+        uv: &UvLayer,
+        island_of_face: &[u32],
+        n: usize,
+        rotate: bool,
+        cache: Option<&mut IslandCache>,
+    ) -> Self {
         let mut index: HashMap<(u32, u32), u32> = HashMap::with_capacity(uv.coords.len());
         let mut coords = Vec::with_capacity(uv.coords.len());
         let mut members: Vec<Vec<u32>> = vec![Vec::new(); n];
@@ -316,25 +375,55 @@ impl Layout {
             count[i as usize] += 1;
         }
         let mut tris: Vec<Vec<[u32; 3]>> = vec![Vec::new(); n];
+        let mut faces: Vec<Vec<u32>> = vec![Vec::new(); n];
         for (f, t) in triangles.iter().enumerate() {
             tris[island_of_face[f] as usize].push(t.map(|j: u32| local[j as usize]));
+            faces[island_of_face[f] as usize].push(f as u32);
         }
-        let islands = (0..n)
+        let reuse = cache.as_deref();
+        let prepared: Vec<(Island, Vec<[f64; 2]>, bool)> = (0..n)
             .into_par_iter()
             .zip(tris)
             .zip(metrics)
             .map(|((i, tris), metric)| {
                 let points: Vec<[f64; 2]> =
                     members[i].iter().map(|&c| uv.coords[c as usize].map(|x| x as f64)).collect();
+                // Whether an island is degenerate also depends on the whole layer's extent.
                 let degenerate = !(area_3d[i] > eps_3d && area_uv[i] > eps_uv);
+                let hit = reuse.and_then(|c| c.entries.get(&faces[i])).filter(|c| {
+                    c.rotate == rotate
+                        && c.outlined == (n <= SHAPES_UP_TO)
+                        && c.island.degenerate == degenerate
+                        && c.island.area_3d.to_bits() == area_3d[i].to_bits()
+                        && c.island.tris == tris
+                        && c.points == points
+                });
+                if let Some(c) = hit {
+                    return (c.island.clone(), points, true);
+                }
                 let mut island =
                     Island::new(&points, tris, &metric, area_uv[i], area_3d[i], degenerate, rotate);
                 if n <= SHAPES_UP_TO {
                     island.outline = shapes::Outline::of(&island.points, &island.tris);
                 }
-                island
+                (island, points, false)
             })
             .collect();
+        let islands = match cache {
+            Some(cache) => {
+                cache.hits += prepared.iter().filter(|(_, _, hit)| *hit).count();
+                cache.entries = faces
+                    .into_iter()
+                    .zip(&prepared)
+                    .map(|(f, (island, points, _))| {
+                        let outlined = n <= SHAPES_UP_TO;
+                        (f, CachedIsland { points: points.clone(), rotate, outlined, island: island.clone() })
+                    })
+                    .collect();
+                prepared.into_iter().map(|(island, ..)| island).collect()
+            }
+            None => prepared.into_iter().map(|(island, ..)| island).collect(),
+        };
         Self { islands, coords, triangles }
     }
 }
@@ -351,7 +440,7 @@ fn uv_square_side(uv: &UvLayer) -> f64 {
     (hi[0] - lo[0]).max(hi[1] - lo[1]).max(0.0)
 }
 
-#[cfg_attr(test, derive(Clone))]
+#[derive(Clone)]
 /// One island's fixed frame: its rotation, its bounding rectangle in that frame and how its size
 /// grows with the atlas scale.
 struct Island {

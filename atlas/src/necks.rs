@@ -74,7 +74,8 @@ use crate::error::AtlasError;
 use crate::geom::to_dvec3;
 use crate::injective::{path_back, shortest_paths};
 use crate::islands::{
-    IslandPacking, SHAPES_UP_TO, ScaleTest, convex_hull, min_area_rotation, pack_islands, rotated,
+    IslandCache, IslandPacking, SHAPES_UP_TO, ScaleTest, convex_hull, min_area_rotation, pack_islands,
+    rotated,
 };
 use crate::metrics::{EvalOptions, unpacked_editability};
 use crate::partuv::face_areas_3d;
@@ -214,6 +215,8 @@ pub fn cut_necks(mesh: &TriMesh, opts: &NeckOptions) -> Result<Necked, AtlasErro
     let areas = face_areas_3d(mesh);
     let size = areas.iter().sum::<f64>().sqrt();
     let mut failures = 0;
+    // The islands of the last trial, most of which the next one shares.
+    let mut prepared = IslandCache::default();
     // Every packing attempt costs about the same per face (the islands' turns and shapes).
     let face_count = mesh.triangles.len().max(1);
     let affordable = |r: &NeckReport| (r.trials + r.probes) * face_count < opts.max_face_attempts;
@@ -244,7 +247,7 @@ pub fn cut_necks(mesh: &TriMesh, opts: &NeckOptions) -> Result<Necked, AtlasErro
             let target = scale * rise.sqrt();
             let trial = apply_cut(&current, uv, &faces, &side);
             report.trials += 1;
-            let test = ScaleTest::new(&trial, &opts.packing)?;
+            let test = ScaleTest::with_cache(&trial, &opts.packing, &mut prepared)?;
             if test.packs_at(target) {
                 kept = Some((trial, test, seam, rise));
                 break;

@@ -3,7 +3,9 @@
 //! small hand-made layouts with known answers and on spot's own atlas at several resolutions.
 
 use nuvo_atlas::AtlasError;
-use nuvo_atlas::islands::{IslandPacking, ORDER_SEARCH, PackedIslands, pack_islands, packs_at_scale};
+use nuvo_atlas::islands::{
+    IslandCache, IslandPacking, ORDER_SEARCH, PackedIslands, ScaleTest, pack_islands, packs_at_scale,
+};
 use nuvo_atlas::load::load_mesh_with_uv;
 use nuvo_atlas::uvstats::uv_charts;
 use nuvo_geometry::testdata::data_file;
@@ -316,6 +318,49 @@ fn one_packing_attempt_fits_at_the_scale_the_packer_finds_and_not_beyond_what_fi
         "two 512-texel squares and gutters exceed 1024"
     );
     assert!(packs_at_scale(&m, &opts(1024, 1024, true), found).is_err(), "bad options are an error");
+}
+
+#[test]
+fn a_cached_scale_test_answers_as_a_fresh_one_and_reuses_only_unchanged_islands() {
+    // Layouts of one mesh as the necks pass makes them: the second moves and turns one island,
+    // the third moves it back, the fourth changes the UV extent of the whole layer.
+    let layouts = [
+        mesh(&[
+            l_island(0.0),
+            rect(2.0, 1.0, 1.0, [0.0, 0.5], 0.2, 0.0),
+            rect(1.0, 1.0, 2.0, [0.5, 0.5], 0.1, 0.0),
+        ]),
+        mesh(&[
+            l_island(0.0),
+            rect(2.0, 1.0, 1.0, [0.7, 0.1], 0.2, 30.0),
+            rect(1.0, 1.0, 2.0, [0.5, 0.5], 0.1, 0.0),
+        ]),
+        mesh(&[
+            l_island(0.0),
+            rect(2.0, 1.0, 1.0, [0.0, 0.5], 0.2, 0.0),
+            rect(1.0, 1.0, 2.0, [0.5, 0.5], 0.1, 0.0),
+        ]),
+        mesh(&[
+            l_island(0.0),
+            rect(2.0, 1.0, 1.0, [9.0, 9.0], 0.2, 0.0),
+            rect(1.0, 1.0, 2.0, [0.5, 0.5], 0.1, 0.0),
+        ]),
+    ];
+    let o = opts(256, 2, true);
+    let mut cache = IslandCache::default();
+    let mut hits = Vec::new();
+    for m in &layouts {
+        let cached = ScaleTest::with_cache(m, &o, &mut cache).unwrap();
+        let fresh = ScaleTest::new(m, &o).unwrap();
+        let found = pack(m, o).scale;
+        for k in 0..40 {
+            let scale = found * (0.8 + 0.01 * k as f64);
+            assert_eq!(cached.packs_at(scale), fresh.packs_at(scale), "scale {scale}");
+        }
+        hits.push(cache.hits());
+    }
+    // The first layout prepares all three; each later one reuses the two it shares with the last.
+    assert_eq!(hits, [0, 2, 4, 6]);
 }
 
 #[test]
