@@ -231,12 +231,25 @@ impl ScaleTest {
         opts: &IslandPacking,
         cache: &mut IslandCache,
     ) -> Result<Self, AtlasError> {
+        let (test, next) = Self::reusing(mesh, opts, cache)?;
+        *cache = next;
+        Ok(test)
+    }
+
+    /// As [`ScaleTest::with_cache`], leaving `cache` as it is and returning the cache this
+    /// layout leaves (its islands; the hits counted on from `cache`'s): so that several trials
+    /// can read one cache at once.
+    pub fn reusing(
+        mesh: &TriMesh,
+        opts: &IslandPacking,
+        cache: &IslandCache,
+    ) -> Result<(Self, IslandCache), AtlasError> {
         let uv = require_uv(mesh)?;
         check_options(opts)?;
         let (island_of_face, n) = uv_charts(mesh, uv);
-        let layout = Layout::of_cached(mesh, uv, &island_of_face, n, opts.rotate, Some(cache));
+        let (layout, next) = Layout::of_cached(mesh, uv, &island_of_face, n, opts.rotate, Some(cache));
         let orders = ShapeOrders::of(&layout.islands);
-        Ok(ScaleTest { layout, orders, opts: *opts })
+        Ok((ScaleTest { layout, orders, opts: *opts }, next.unwrap_or_default()))
     }
 
     /// Whether the islands fit at the common `scale` ([`packs_at_scale`]).
@@ -320,19 +333,19 @@ struct Layout {
 
 impl Layout {
     fn of(mesh: &TriMesh, uv: &UvLayer, island_of_face: &[u32], n: usize, rotate: bool) -> Self {
-        Self::of_cached(mesh, uv, island_of_face, n, rotate, None)
+        Self::of_cached(mesh, uv, island_of_face, n, rotate, None).0
     }
 
-    /// [`Layout::of`], reusing the islands `cache` holds unchanged and leaving this layout's
-    /// islands in it ([`IslandCache`]).
+    /// [`Layout::of`], reusing the islands `reuse` holds unchanged; with `reuse`, also the
+    /// cache of this layout's islands ([`IslandCache`]).
     fn of_cached(
         mesh: &TriMesh,
         uv: &UvLayer,
         island_of_face: &[u32],
         n: usize,
         rotate: bool,
-        cache: Option<&mut IslandCache>,
-    ) -> Self {
+        reuse: Option<&IslandCache>,
+    ) -> (Self, Option<IslandCache>) {
         let mut index: HashMap<(u32, u32), u32> = HashMap::with_capacity(uv.coords.len());
         let mut coords = Vec::with_capacity(uv.coords.len());
         let mut members: Vec<Vec<u32>> = vec![Vec::new(); n];
@@ -380,7 +393,6 @@ impl Layout {
             tris[island_of_face[f] as usize].push(t.map(|j: u32| local[j as usize]));
             faces[island_of_face[f] as usize].push(f as u32);
         }
-        let reuse = cache.as_deref();
         let prepared: Vec<(Island, Vec<[f64; 2]>, bool)> = (0..n)
             .into_par_iter()
             .zip(tris)
@@ -409,22 +421,20 @@ impl Layout {
                 (island, points, false)
             })
             .collect();
-        let islands = match cache {
-            Some(cache) => {
-                cache.hits += prepared.iter().filter(|(_, _, hit)| *hit).count();
-                cache.entries = faces
-                    .into_iter()
-                    .zip(&prepared)
-                    .map(|(f, (island, points, _))| {
-                        let outlined = n <= SHAPES_UP_TO;
-                        (f, CachedIsland { points: points.clone(), rotate, outlined, island: island.clone() })
-                    })
-                    .collect();
-                prepared.into_iter().map(|(island, ..)| island).collect()
-            }
-            None => prepared.into_iter().map(|(island, ..)| island).collect(),
-        };
-        Self { islands, coords, triangles }
+        let next = reuse.map(|old| {
+            let hits = old.hits + prepared.iter().filter(|(_, _, hit)| *hit).count();
+            let entries = faces
+                .into_iter()
+                .zip(&prepared)
+                .map(|(f, (island, points, _))| {
+                    let outlined = n <= SHAPES_UP_TO;
+                    (f, CachedIsland { points: points.clone(), rotate, outlined, island: island.clone() })
+                })
+                .collect();
+            IslandCache { entries, hits }
+        });
+        let islands = prepared.into_iter().map(|(island, ..)| island).collect();
+        (Self { islands, coords, triangles }, next)
     }
 }
 

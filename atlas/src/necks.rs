@@ -62,11 +62,15 @@
 //! Each part keeps the map it had (a part of an injective map is injective), so no face flips
 //! and no distortion changes; only seams and the layout do (the bake's caller then relaxes the
 //! parts with SLIM, [`crate::injective`], when it makes islands injective). Deterministic: the
-//! same mesh and options give the same bits.
+//! same mesh and options give the same bits. An island's candidates are packed up to a thread's
+//! worth at once (the other core was idle during a trial's sequential placements: the README
+//! bunny's pass 4.2 → 3.6 s); the first in order that packs is kept and the trials counted are
+//! those up to it, so neither the cuts nor the report depend on the number of threads.
 
 use std::collections::{HashMap, HashSet};
 
 use nuvo_geometry::{TriMesh, UvLayer};
+use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::camera::orbit_views;
@@ -235,22 +239,47 @@ pub fn cut_necks(mesh: &TriMesh, opts: &NeckOptions) -> Result<Necked, AtlasErro
         };
         let faces = islands.swap_remove(pick);
         tried.insert(faces.clone());
+        let candidates = neck_cuts(&current, uv, &faces, opts.candidates);
         let mut kept = None;
-        for (side, seam) in neck_cuts(&current, uv, &faces, opts.candidates) {
-            if report.trials >= opts.max_trials || !affordable(&report) {
+        let mut next = 0;
+        while kept.is_none() && next < candidates.len() {
+            // The candidates the budget lets the pass try from here, one after the other; up to
+            // a thread's worth are tried at once, and the first in order that packs is kept, so
+            // the pass keeps what trying them one at a time would and counts the same trials.
+            let mut room = 0;
+            while next + room < candidates.len()
+                && report.trials + room < opts.max_trials
+                && (report.trials + room + report.probes) * face_count < opts.max_face_attempts
+            {
+                room += 1;
+            }
+            let batch = room.min(rayon::current_num_threads().max(1));
+            if batch == 0 {
                 break;
             }
-            // The efficiency this cut must reach, as a factor on the current one (module docs);
-            // at one texel density the efficiency grows with the square of the scale.
-            let rise =
-                1.0 + (opts.min_gain / efficiency).max(opts.seam_cost * seam / size.max(f64::MIN_POSITIVE));
-            let target = scale * rise.sqrt();
-            let trial = apply_cut(&current, uv, &faces, &side);
-            report.trials += 1;
-            let test = ScaleTest::with_cache(&trial, &opts.packing, &mut prepared)?;
-            if test.packs_at(target) {
-                kept = Some((trial, test, seam, rise));
-                break;
+            let tried_now: Vec<_> = candidates[next..next + batch]
+                .par_iter()
+                .map(|(side, seam)| {
+                    // The efficiency this cut must reach, as a factor on the current one (module
+                    // docs); at one texel density the efficiency grows with the square of the scale.
+                    let rise = 1.0
+                        + (opts.min_gain / efficiency)
+                            .max(opts.seam_cost * seam / size.max(f64::MIN_POSITIVE));
+                    let trial = apply_cut(&current, uv, &faces, side);
+                    let (test, cache) = ScaleTest::reusing(&trial, &opts.packing, &prepared)?;
+                    let packs = test.packs_at(scale * rise.sqrt());
+                    Ok((trial, test, cache, *seam, rise, packs))
+                })
+                .collect::<Result<_, AtlasError>>()?;
+            let first = tried_now.iter().position(|t| t.5);
+            report.trials += first.map_or(batch, |k| k + 1);
+            next += batch;
+            let last = first.unwrap_or(batch - 1);
+            if let Some((trial, test, cache, seam, rise, packs)) = tried_now.into_iter().nth(last) {
+                prepared = cache;
+                if packs {
+                    kept = Some((trial, test, seam, rise));
+                }
             }
         }
         let Some((trial, probe, seam, rise)) = kept else {
@@ -636,6 +665,24 @@ mod tests {
         let mut none = NeckReport::default();
         assert!(judge_cuts(&mesh, &mesh, &NeckOptions::default(), &mut none).unwrap());
         assert_eq!(none.editability, None);
+    }
+
+    #[test]
+    fn one_thread_or_several_try_the_same_cuts_and_count_the_same_trials() {
+        // A comb: a spine with four teeth, so that candidates both pass and fail. Candidates
+        // are tried a thread's worth at once; what is kept and counted must not depend on it.
+        let comb = shape(32, 16, 8.0, 4.0, |x, y| y < 1.0 || (x % 2.0) < 1.0);
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| cut_necks(&comb, &NeckOptions::default()).unwrap())
+        };
+        let one = run(1);
+        assert!(one.report.cuts >= 1 && one.report.trials > one.report.cuts, "{:?}", one.report);
+        for threads in [2, 3] {
+            let several = run(threads);
+            assert_eq!(several.report, one.report, "{threads} threads");
+            assert!(several.mesh == one.mesh, "{threads} threads");
+        }
     }
 
     #[test]
