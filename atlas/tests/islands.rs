@@ -324,28 +324,16 @@ fn one_packing_attempt_fits_at_the_scale_the_packer_finds_and_not_beyond_what_fi
 fn a_cached_scale_test_answers_as_a_fresh_one_and_reuses_only_unchanged_islands() {
     // Layouts of one mesh as the necks pass makes them: the second moves and turns one island,
     // the third moves it back, the fourth changes the UV extent of the whole layer.
-    let layouts = [
+    // The L and the small square stay; the middle island's UV origin and turn change.
+    let layout = |origin: [f32; 2], deg: f32| {
         mesh(&[
             l_island(0.0),
-            rect(2.0, 1.0, 1.0, [0.0, 0.5], 0.2, 0.0),
+            rect(2.0, 1.0, 1.0, origin, 0.2, deg),
             rect(1.0, 1.0, 2.0, [0.5, 0.5], 0.1, 0.0),
-        ]),
-        mesh(&[
-            l_island(0.0),
-            rect(2.0, 1.0, 1.0, [0.7, 0.1], 0.2, 30.0),
-            rect(1.0, 1.0, 2.0, [0.5, 0.5], 0.1, 0.0),
-        ]),
-        mesh(&[
-            l_island(0.0),
-            rect(2.0, 1.0, 1.0, [0.0, 0.5], 0.2, 0.0),
-            rect(1.0, 1.0, 2.0, [0.5, 0.5], 0.1, 0.0),
-        ]),
-        mesh(&[
-            l_island(0.0),
-            rect(2.0, 1.0, 1.0, [9.0, 9.0], 0.2, 0.0),
-            rect(1.0, 1.0, 2.0, [0.5, 0.5], 0.1, 0.0),
-        ]),
-    ];
+        ])
+    };
+    let layouts =
+        [layout([0.0, 0.5], 0.0), layout([0.7, 0.1], 30.0), layout([0.0, 0.5], 0.0), layout([9.0, 9.0], 0.0)];
     let o = opts(256, 2, true);
     let mut cache = IslandCache::default();
     let mut hits = Vec::new();
