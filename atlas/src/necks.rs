@@ -268,17 +268,17 @@ pub fn cut_necks(mesh: &TriMesh, opts: &NeckOptions) -> Result<Necked, AtlasErro
                     let trial = apply_cut(&current, uv, &faces, side);
                     let (test, cache) = ScaleTest::reusing(&trial, &opts.packing, &prepared)?;
                     let packs = test.packs_at(scale * rise.sqrt());
-                    Ok((trial, test, cache, *seam, rise, packs))
+                    Ok(Trial { mesh: trial, test, cache, seam: *seam, rise, packs })
                 })
-                .collect::<Result<_, AtlasError>>()?;
-            let first = tried_now.iter().position(|t| t.5);
+                .collect::<Result<Vec<Trial>, AtlasError>>()?;
+            let first = tried_now.iter().position(|t| t.packs);
             report.trials += first.map_or(batch, |k| k + 1);
             next += batch;
             let last = first.unwrap_or(batch - 1);
-            if let Some((trial, test, cache, seam, rise, packs)) = tried_now.into_iter().nth(last) {
-                prepared = cache;
-                if packs {
-                    kept = Some((trial, test, seam, rise));
+            if let Some(t) = tried_now.into_iter().nth(last) {
+                prepared = t.cache;
+                if t.packs {
+                    kept = Some((t.mesh, t.test, t.seam, t.rise));
                 }
             }
         }
@@ -311,6 +311,17 @@ pub fn cut_necks(mesh: &TriMesh, opts: &NeckOptions) -> Result<Necked, AtlasErro
     }
     report.efficiency_after = efficiency;
     Ok(Necked { mesh: current, report })
+}
+
+/// One candidate cut tried by [`cut_necks`]: the layout with the cut, its packing test, the
+/// islands it prepared, the cut's 3-D length, the rise it had to reach and whether it did.
+struct Trial {
+    mesh: TriMesh,
+    test: ScaleTest,
+    cache: IslandCache,
+    seam: f64,
+    rise: f64,
+    packs: bool,
 }
 
 /// Whether the cuts that turned `before` into `after` (the same mesh with the layout of
