@@ -88,6 +88,9 @@ pub mod metric_paths {
     pub const PACKING: &str = "/metrics/partuv/packing_efficiency";
     pub const FLIPPED_FACES: &str = "/metrics/uv/flipped_faces";
     pub const OVERLAPPING_FACES: &str = "/metrics/uv/overlapping_faces";
+    /// Each face's σ₁/σ₂ (1: square texels), median and 90th percentile over the faces.
+    pub const TEXEL_ASPECT_MEDIAN: &str = "/metrics/uv/texel_aspect_median";
+    pub const TEXEL_ASPECT_P90: &str = "/metrics/uv/texel_aspect_p90";
     pub const STEPS: &str = "/steps";
 }
 

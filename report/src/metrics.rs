@@ -34,7 +34,7 @@ const fn column(
 
 /// The paper's metrics (Table 1), PartUV's set (`../shared/data/benchmark/README.md`), and the
 /// atlas's health.
-pub const COLUMNS: [Column; 14] = [
+pub const COLUMNS: [Column; 16] = [
     column("paper", "Boundary", BOUNDARY, Better::Higher, 4),
     column("paper", "Stretch", STRETCH, Better::Higher, 4),
     column("paper", "Conformal", CONFORMAL, Better::Higher, 4),
@@ -48,6 +48,8 @@ pub const COLUMNS: [Column; 14] = [
     column("PartUV", "packing", PACKING, Better::Higher, 3),
     column("atlas", "flipped faces", FLIPPED_FACES, Better::Lower, 0),
     column("atlas", "overlapping faces", OVERLAPPING_FACES, Better::Lower, 0),
+    column("atlas", "texel aspect (median)", TEXEL_ASPECT_MEDIAN, Better::Lower, 3),
+    column("atlas", "texel aspect (p90)", TEXEL_ASPECT_P90, Better::Lower, 3),
     column("atlas", "steps", STEPS, Better::Lower, 0),
 ];
 
@@ -78,12 +80,17 @@ mod tests {
 
     #[test]
     fn numbers_come_from_their_paths_and_missing_ones_are_none() {
-        let m = serde_json::json!({"metrics": {"image": {"editability": 0.95}, "partuv": {"charts": 12}}, "steps": 300});
+        let m = serde_json::json!({
+            "metrics": {"image": {"editability": 0.95}, "partuv": {"charts": 12}, "uv": {"texel_aspect_p90": 1.4}},
+            "steps": 300
+        });
         let get = |label: &str| value(Some(&m), COLUMNS.iter().find(|c| c.label == label).unwrap());
         assert_eq!(get("Editability"), Some(0.95));
         assert_eq!(get("charts"), Some(12.0));
         assert_eq!(get("steps"), Some(300.0));
         assert_eq!(get("angular"), None, "an old run has no PartUV angular score");
+        assert_eq!(get("texel aspect (p90)"), Some(1.4));
+        assert_eq!(get("texel aspect (median)"), None);
         assert_eq!(value(None, &COLUMNS[0]), None);
     }
 
