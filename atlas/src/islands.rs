@@ -79,8 +79,9 @@
 //! - **Efficiency**: the summed unsigned UV area of all faces in the output (over the unit
 //!   square's area 1), as [`crate::partuv`] measures packing efficiency.
 //!
-//! The result is deterministic: the same mesh and options give the same bits (no threads, no
-//! hashing order, ties broken by index).
+//! The result is deterministic: the same mesh and options give the same bits at any thread count
+//! (islands are prepared and footprints rasterised in parallel but kept in island order, islands
+//! are placed one after the other; no hashing order; ties broken by index).
 
 use std::collections::HashMap;
 

@@ -439,6 +439,12 @@ fn the_order_search_packs_no_looser_and_keeps_the_invariants() {
             println!("{name} {res}²: {:.4} → {:.4}", without.efficiency, with.efficiency);
             assert!(with.efficiency >= without.efficiency, "{name} {res}²: the search packed looser");
             assert_eq!(with, pack_islands(m, &o).unwrap(), "{name} {res}²: not deterministic");
+            // Footprints are rasterised in parallel; the layout must not depend on the threads.
+            for threads in [1, 3] {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+                let other = pool.install(|| pack_islands(m, &o).unwrap());
+                assert_eq!(with, other, "{name} {res}²: {threads} threads pack otherwise");
+            }
             if name == "9" {
                 // Where the five fixed attempts leave room (0.81 at 512²), the search finds it.
                 assert!(
