@@ -344,6 +344,12 @@ pub struct OutputConfig {
     /// maps. Off by default, on in `nuvo unwrap` (Common Shapes: packing efficiency 0.59 -> 0.68,
     /// charts 12.4 -> 16.4, Editability 0.9721 -> 0.9675, BENCHMARKS.md "More neck cuts").
     pub cut_necks: bool,
+    /// With `cut_necks`: how much packing a seam must buy, the least relative rise of the packing
+    /// efficiency per unit of the cut's 3-D length over the square root of the surface's area
+    /// (`nuvo_atlas::necks::SEAM_COST`, 0.125, by default): larger keeps fewer, shorter seams
+    /// (0.25: Common Shapes packing 0.641 with 13.7 charts, Editability 0.9695), smaller cuts
+    /// for smaller gains (0.0625: 0.681 with 17.2). BENCHMARKS.md, "More neck cuts".
+    pub neck_seam_cost: f64,
     /// How the atlas is laid out: `"squares"` (default, the paper's: one square cell per chart) or
     /// `"islands"` (not in the paper; `nuvo_atlas::islands`: every UV island packed on its own at
     /// one texel density for the whole atlas, rotated to fit, with `gutter` texels between islands).
@@ -395,6 +401,7 @@ impl Default for OutputConfig {
             join: false,
             crease_charts: false,
             cut_necks: false,
+            neck_seam_cost: nuvo_atlas::necks::SEAM_COST,
             cut_cones: false,
             packing: Packing::Squares,
             eval_views: 16,
@@ -891,6 +898,12 @@ impl OutputConfig {
                 return Err(src.invalid(key, "must be 0 (off) or a positive weight"));
             }
         }
+        if !(out.neck_seam_cost.is_finite() && out.neck_seam_cost >= 0.0) {
+            return Err(src.invalid(
+                "output.neck_seam_cost",
+                "must be 0 (a cut need only gain packing) or a positive cost per unit of seam",
+            ));
+        }
         if out.gutter.saturating_mul(4) >= out.atlas_resolution {
             return Err(
                 src.invalid("output.gutter", "leaves no room for the charts at this atlas resolution")
@@ -1048,6 +1061,17 @@ mod tests {
                 let e = out(&format!("{key} = {bad}\n")).unwrap_err();
                 assert!(e.to_string().contains(&format!("output.{key}")), "{key} = {bad}: {e}");
             }
+        }
+    }
+
+    #[test]
+    fn the_neck_seam_cost_defaults_to_the_atlas_crates_and_is_checked() {
+        let out = |extra: &str| from_str("c.toml", &format!("{MINIMAL}[output]\n{extra}"));
+        assert_eq!(out("").unwrap().config.output.neck_seam_cost, nuvo_atlas::necks::SEAM_COST);
+        assert_eq!(out("neck_seam_cost = 0.5\n").unwrap().config.output.neck_seam_cost, 0.5);
+        for bad in ["-1.0", "nan", "inf"] {
+            let e = out(&format!("neck_seam_cost = {bad}\n")).unwrap_err();
+            assert!(e.to_string().contains("output.neck_seam_cost"), "{bad}: {e}");
         }
     }
 

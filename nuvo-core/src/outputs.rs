@@ -215,7 +215,7 @@ fn finish_layout(
         phases.done("creases");
     }
     if opts.packing == Packing::Islands && opts.cut_necks {
-        let neck_options = NeckOptions::default();
+        let neck_options = NeckOptions { seam_cost: opts.neck_seam_cost, ..NeckOptions::default() };
         let mut necked = cut_necks(&mesh, &neck_options)?;
         if necked.report.cuts > 0 {
             let mut cut = necked.mesh;
