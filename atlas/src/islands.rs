@@ -219,38 +219,35 @@ pub struct ScaleTest {
 impl ScaleTest {
     /// The islands of `mesh` for the atlas of `opts`. Errors as [`pack_islands`]'.
     pub fn new(mesh: &TriMesh, opts: &IslandPacking) -> Result<Self, AtlasError> {
-        Self::with_cache(mesh, opts, &mut IslandCache::default())
+        Self::prepare(mesh, opts, None).map(|(test, _)| test)
     }
 
     /// As [`ScaleTest::new`], taking every island that `cache` holds unchanged (same faces,
-    /// same texture coordinates) from it instead of preparing it again, and leaving in `cache`
-    /// the islands of `mesh`. The answers are those of [`ScaleTest::new`]. `cache` must only
-    /// ever see meshes with the same positions (the layouts of one mesh), which it checks by
-    /// each island's 3-D area.
-    pub fn with_cache(
-        mesh: &TriMesh,
-        opts: &IslandPacking,
-        cache: &mut IslandCache,
-    ) -> Result<Self, AtlasError> {
-        let (test, next) = Self::reusing(mesh, opts, cache)?;
-        *cache = next;
-        Ok(test)
-    }
-
-    /// As [`ScaleTest::with_cache`], leaving `cache` as it is and returning the cache this
-    /// layout leaves (its islands; the hits counted on from `cache`'s): so that several trials
-    /// can read one cache at once.
+    /// same texture coordinates) from it instead of preparing it again, and returning with the
+    /// test the cache this layout leaves (its islands; the hits counted on from `cache`'s).
+    /// `cache` is only read, so several trials can share it. The answers are those of
+    /// [`ScaleTest::new`]. A cache must only ever see meshes with the same positions (the
+    /// layouts of one mesh), which it checks by each island's 3-D area.
     pub fn reusing(
         mesh: &TriMesh,
         opts: &IslandPacking,
         cache: &IslandCache,
     ) -> Result<(Self, IslandCache), AtlasError> {
+        Self::prepare(mesh, opts, Some(cache)).map(|(test, next)| (test, next.unwrap_or_default()))
+    }
+
+    /// [`ScaleTest::new`] and [`ScaleTest::reusing`]: a cache of this layout only when one was given.
+    fn prepare(
+        mesh: &TriMesh,
+        opts: &IslandPacking,
+        cache: Option<&IslandCache>,
+    ) -> Result<(Self, Option<IslandCache>), AtlasError> {
         let uv = require_uv(mesh)?;
         check_options(opts)?;
         let (island_of_face, n) = uv_charts(mesh, uv);
-        let (layout, next) = Layout::of_cached(mesh, uv, &island_of_face, n, opts.rotate, Some(cache));
+        let (layout, next) = Layout::of_cached(mesh, uv, &island_of_face, n, opts.rotate, cache);
         let orders = ShapeOrders::of(&layout.islands);
-        Ok((ScaleTest { layout, orders, opts: *opts }, next.unwrap_or_default()))
+        Ok((ScaleTest { layout, orders, opts: *opts }, next))
     }
 
     /// Whether the islands fit at the common `scale` ([`packs_at_scale`]).
@@ -273,7 +270,7 @@ impl ScaleTest {
 }
 
 /// Islands prepared for packing (turned to their least shear, outlined), kept from one
-/// [`ScaleTest::with_cache`] to the next. Why: the necks pass tries dozens of cuts of one
+/// [`ScaleTest::reusing`] to the next. Why: the necks pass tries dozens of cuts of one
 /// mesh, each a layout that differs from the last in one or two islands, and preparing every
 /// island again (above all the least-shear turn of every face) was 1.6 s of the horse's 3.8 s
 /// pass (BENCHMARKS.md, "More neck cuts"). An island is taken from the cache only when its

@@ -223,11 +223,11 @@ pub fn cut_necks(mesh: &TriMesh, opts: &NeckOptions) -> Result<Necked, AtlasErro
     let mut prepared = IslandCache::default();
     // Every packing attempt costs about the same per face (the islands' turns and shapes).
     let face_count = mesh.triangles.len().max(1);
-    let affordable = |r: &NeckReport| (r.trials + r.probes) * face_count < opts.max_face_attempts;
+    let affordable = |attempts: usize| attempts * face_count < opts.max_face_attempts;
     while report.trials < opts.max_trials
         && failures < opts.max_failures
         && scale > 0.0
-        && affordable(&report)
+        && affordable(report.trials + report.probes)
     {
         let uv = require_uv(&current)?;
         let mut islands = uv_islands(&current, uv);
@@ -249,7 +249,7 @@ pub fn cut_necks(mesh: &TriMesh, opts: &NeckOptions) -> Result<Necked, AtlasErro
             let mut room = 0;
             while next + room < candidates.len()
                 && report.trials + room < opts.max_trials
-                && (report.trials + room + report.probes) * face_count < opts.max_face_attempts
+                && affordable(report.trials + room + report.probes)
             {
                 room += 1;
             }
@@ -290,7 +290,7 @@ pub fn cut_necks(mesh: &TriMesh, opts: &NeckOptions) -> Result<Necked, AtlasErro
         // the islands the trial prepared.
         let (mut lo, mut step) = (rise, PROBE_STEP);
         let mut hi = None;
-        while hi.is_none_or(|h: f64| h / lo > 1.0 + PROBE_STEP) && affordable(&report) {
+        while hi.is_none_or(|h: f64| h / lo > 1.0 + PROBE_STEP) && affordable(report.trials + report.probes) {
             let next = match hi {
                 None => lo * (1.0 + step),
                 Some(h) => (lo * h).sqrt(),

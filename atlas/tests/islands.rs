@@ -338,7 +338,8 @@ fn a_cached_scale_test_answers_as_a_fresh_one_and_reuses_only_unchanged_islands(
     let mut cache = IslandCache::default();
     let mut hits = Vec::new();
     for m in &layouts {
-        let cached = ScaleTest::with_cache(m, &o, &mut cache).unwrap();
+        let (cached, next) = ScaleTest::reusing(m, &o, &cache).unwrap();
+        cache = next;
         let fresh = ScaleTest::new(m, &o).unwrap();
         let found = pack(m, o).scale;
         for k in 0..40 {
