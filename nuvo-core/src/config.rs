@@ -770,10 +770,8 @@ impl ExperimentConfig {
         }
         self.output.validate(src)?;
         for (name, l) in self.losses.iter().flatten() {
-            if let Some(w) = l.weight
-                && !(w.is_finite() && w >= 0.0)
-            {
-                return Err(src.invalid(&format!("losses.{name}.weight"), "must be a non-negative number"));
+            if let Some(w) = l.weight {
+                non_negative(&format!("losses.{name}.weight"), w, "must be a non-negative number", src)?;
             }
         }
         Ok(())
@@ -855,9 +853,7 @@ impl OptimizerConfig {
             ("optimizer.lr_sigma", o.lr_sigma),
             ("optimizer.lr_grid", o.lr_grid),
         ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(src.invalid(key, "must be a non-negative number"));
-            }
+            non_negative(key, v, "must be a non-negative number", src)?;
         }
         for (key, v) in [("optimizer.beta1", o.beta1), ("optimizer.beta2", o.beta2)] {
             if !(0.0..1.0).contains(&v) {
@@ -880,9 +876,12 @@ impl OutputConfig {
         if !(16..=16384).contains(&out.atlas_resolution) {
             return Err(src.invalid("output.atlas_resolution", "must be between 16 and 16384 texels"));
         }
-        if !(out.round_trip_tolerance.is_finite() && out.round_trip_tolerance >= 0.0) {
-            return Err(src.invalid("output.round_trip_tolerance", "must be 0 (off) or a positive fraction"));
-        }
+        non_negative(
+            "output.round_trip_tolerance",
+            out.round_trip_tolerance,
+            "must be 0 (off) or a positive fraction",
+            src,
+        )?;
         if out.injective_split_energy.is_nan() || out.injective_split_energy <= 0.0 {
             return Err(src.invalid(
                 "output.injective_split_energy",
@@ -894,16 +893,14 @@ impl OutputConfig {
             ("output.injective_orthogonal", out.injective_orthogonal),
             ("output.injective_equiareal", out.injective_equiareal),
         ] {
-            if !(weight.is_finite() && weight >= 0.0) {
-                return Err(src.invalid(key, "must be 0 (off) or a positive weight"));
-            }
+            non_negative(key, weight, "must be 0 (off) or a positive weight", src)?;
         }
-        if !(out.neck_seam_cost.is_finite() && out.neck_seam_cost >= 0.0) {
-            return Err(src.invalid(
-                "output.neck_seam_cost",
-                "must be 0 (a cut need only gain packing) or a positive cost per unit of seam",
-            ));
-        }
+        non_negative(
+            "output.neck_seam_cost",
+            out.neck_seam_cost,
+            "must be 0 (a cut need only gain packing) or a positive cost per unit of seam",
+            src,
+        )?;
         if out.gutter.saturating_mul(4) >= out.atlas_resolution {
             return Err(
                 src.invalid("output.gutter", "leaves no room for the charts at this atlas resolution")
@@ -933,6 +930,12 @@ impl OutputConfig {
 /// `Err` naming `key` unless `v ≥ 1`.
 fn positive(key: &str, v: usize, src: &ConfigSource) -> Result<(), ConfigError> {
     if v == 0 { Err(src.invalid(key, "must be at least 1")) } else { Ok(()) }
+}
+
+/// `Err` naming `key` with `message` unless `v` is finite and `≥ 0`.
+fn non_negative(key: &str, v: impl Into<f64>, message: &str, src: &ConfigSource) -> Result<(), ConfigError> {
+    let v = v.into();
+    if v.is_finite() && v >= 0.0 { Ok(()) } else { Err(src.invalid(key, message)) }
 }
 
 fn finite(key: &str, v: f32, src: &ConfigSource) -> Result<(), ConfigError> {
