@@ -141,8 +141,15 @@
 //!   Parts of one island, and with `split` all islands, lie on top of each other: a packing step
 //!   ([`crate::islands`]) must follow, as `split` says.
 //!
-//! Islands are processed in parallel (rayon), each sequentially; the result does not depend on the
-//! thread count.
+//! Islands are processed in parallel, largest first (`largest_first`); inside an island, the
+//! per-face work of SLIM (its weights and rotations, energies, injectivity angles, step bounds,
+//! the system's slots) runs in parallel too, in tasks of at least [`FACES_PER_TASK`] faces, each
+//! face's value computed alone and every sum, minimum and assembly then taken sequentially in
+//! face order, as before. So the result does not depend on the thread count, and is the same
+//! bits as a sequential solve. The sparse factorisations stay sequential (`Pattern`).
+
+use std::sync::OnceLock;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use foldhash::{HashMap, HashMapExt, HashSet, HashSetExt};
 
@@ -210,6 +217,11 @@ pub const SCAFFOLD_MARGIN: f64 = 0.5;
 pub const SCAFFOLD_ROUNDS: usize = 4;
 /// The scaffold's total weight, as a share of the patch's.
 pub const SCAFFOLD_WEIGHT: f64 = 1e-2;
+/// The fewest faces one parallel task of an island's per-face work handles (module docs): an
+/// island smaller than this runs each such loop on its own thread, as all did before. Why
+/// parallel inside an island at all: islands are solved in parallel, but the largest one often
+/// finishes alone, one core idle (the README job's `injective` phase held ~1 s at 100% CPU).
+pub const FACES_PER_TASK: usize = 2048;
 /// Rounding slack (radians) on the full turn that the fans at one boundary point may make: the
 /// two sides of a closed slit meet at its ends, whose fans turn exactly once.
 pub const BOUNDARY_TURN_SLACK: f64 = 1e-9;
@@ -419,10 +431,8 @@ pub fn make_injective_where(
     let count = members.len();
     let degenerate = degenerate_3d_faces(mesh);
     let ctx = Ctx { mesh, uv, degenerate: &degenerate, opts };
-    let results: Vec<IslandResult> = members
-        .par_iter()
-        .map(|faces| if solve(faces) { ctx.island(faces) } else { IslandResult::kept(faces) })
-        .collect();
+    let island = |faces: &[u32]| if solve(faces) { ctx.island(faces) } else { IslandResult::kept(faces) };
+    let results = largest_first(&members, island);
 
     let mut report = InjectiveReport { islands_before: count, ..Default::default() };
     let (mut parts_faces, mut parts_corners) = (Vec::new(), Vec::new());
@@ -455,6 +465,27 @@ pub fn make_injective_where(
     let (coords, triangles, _) = write_back(uv, &parts_faces, &new_corners);
     let out = TriMesh { uv: Some(UvLayer { coords, triangles }), ..mesh.clone() };
     Ok(Injective { mesh: out, report })
+}
+
+/// `island` of every island, in the islands' order, computed in parallel with the islands taken
+/// largest first (most faces; ties in order) from one queue by as many workers as the pool has
+/// threads. Why: the islands' parallel map split the list in halves, so the largest island was
+/// often started last and solved alone, one core idle (the README bunny's `injective` phase:
+/// one thread idle 1.3 s of 3.1 s); largest first, the small islands fill the gaps at the end. Each result
+/// depends on its island alone, so the order of work changes no bit of the output.
+fn largest_first<R: Send + Sync>(islands: &[Vec<u32>], island: impl Fn(&[u32]) -> R + Sync) -> Vec<R> {
+    let mut queue: Vec<usize> = (0..islands.len()).collect();
+    queue.sort_by_key(|&i| std::cmp::Reverse(islands[i].len()));
+    let next = AtomicUsize::new(0);
+    let done: Vec<OnceLock<R>> = islands.iter().map(|_| OnceLock::new()).collect();
+    let workers = rayon::current_num_threads().min(islands.len());
+    (0..workers).into_par_iter().with_max_len(1).for_each(|_| {
+        while let Some(&i) = queue.get(next.fetch_add(1, Ordering::Relaxed)) {
+            // Each index is taken once, so each cell is set once.
+            let _ = done[i].set(island(&islands[i]));
+        }
+    });
+    done.into_iter().map(|cell| cell.into_inner().expect("every island is taken")).collect()
 }
 
 /// The inputs every island reads.
@@ -869,6 +900,12 @@ fn corner_angle(q: [[f64; 2]; 3], k: usize) -> f64 {
     (u[0] * v[1] - u[1] * v[0]).atan2(u[0] * v[0] + u[1] * v[1])
 }
 
+/// `f` of every face index `0..faces`, in order, computed in parallel tasks of at least
+/// [`FACES_PER_TASK`] faces (module docs: the caller folds the values in order).
+fn per_face<T: Send>(faces: usize, f: impl Fn(usize) -> T + Sync + Send) -> Vec<T> {
+    (0..faces).into_par_iter().with_min_len(FACES_PER_TASK).map(f).collect()
+}
+
 /// `x > 0`, false for NaN: the test every area and determinant must pass.
 fn is_positive(x: f64) -> bool {
     x > 0.0
@@ -1163,14 +1200,15 @@ impl Patch {
         if !self.topology.manifold || p.iter().flatten().any(|x| !x.is_finite()) {
             return false;
         }
+        let corner_angles = per_face(self.corners.len(), |t| {
+            let q = self.corners[t].map(|i| p[i as usize]);
+            (!self.collapsed[t] && is_positive(area2(q))).then(|| [0, 1, 2].map(|k| corner_angle(q, k)))
+        });
         let mut angle = vec![0.0f64; self.n];
-        for (_, c) in self.live() {
-            let q = c.map(|i| p[i as usize]);
-            if !is_positive(area2(q)) {
-                return false;
-            }
+        for (t, c) in self.live() {
+            let Some(a) = corner_angles[t] else { return false };
             for k in 0..3 {
-                angle[c[k] as usize] += corner_angle(q, k);
+                angle[c[k] as usize] += a[k];
             }
         }
         let tau = std::f64::consts::TAU;
@@ -1223,10 +1261,14 @@ impl Patch {
     }
 
     fn energy_of(&self, p: &[[f64; 2]], all: bool, terms: Terms) -> Option<f64> {
-        let mut e = 0.0;
-        for (t, c) in self.live() {
+        let density = per_face(self.corners.len(), |t| {
             let rest = &self.rest[t];
-            let d = slim_density(rest.jacobian(c.map(|i| p[i as usize])), rest.terms(terms));
+            let q = self.corners[t].map(|i| p[i as usize]);
+            if self.collapsed[t] { 0.0 } else { slim_density(rest.jacobian(q), rest.terms(terms)) }
+        });
+        let mut e = 0.0;
+        for (t, _) in self.live() {
+            let (rest, d) = (&self.rest[t], density[t]);
             if !d.is_finite() {
                 return None;
             }
@@ -1491,7 +1533,7 @@ impl Patch {
         let Some(mut energy) = self.objective(&p, terms) else { return (p, 0) };
         let isometric = 4.0 * self.rest_weight();
         let glue = self.coincident_boundary(&p);
-        let Some(mut system) = SlimSystem::new(self, glue, terms) else { return (p, 0) };
+        let mut system = SlimSystem::new(self, glue, terms);
         let mut rounds = 0;
         let mut kept: Option<Scaffold> = None;
         for _ in 0..opts.iterations {
@@ -1572,9 +1614,11 @@ impl Patch {
     /// The first `t > 0` at which some live face's signed area along `p + t d` reaches zero
     /// (infinity when none does).
     fn max_step(&self, p: &[[f64; 2]], d: &[[f64; 2]]) -> f64 {
-        self.live()
-            .map(|(_, c)| triangle_zero_step(c.map(|i| p[i as usize]), c.map(|i| d[i as usize])))
-            .fold(f64::INFINITY, f64::min)
+        let step = per_face(self.corners.len(), |t| {
+            let c = self.corners[t];
+            triangle_zero_step(c.map(|i| p[i as usize]), c.map(|i| d[i as usize]))
+        });
+        self.live().map(|(t, _)| step[t]).fold(f64::INFINITY, f64::min)
     }
 
     /// Cuts a patch open into a disc (module docs, step 3): a closed patch along a slit, the
@@ -2767,10 +2811,12 @@ impl Scaffold {
     fn max_step(&self, p: &[[f64; 2]], d: &[[f64; 2]]) -> f64 {
         let zero = [0.0, 0.0];
         let dir = |v: u32| if (v as usize) < self.n { d[v as usize] } else { zero };
-        self.tris
-            .iter()
-            .map(|t| triangle_zero_step(t.map(|v| self.pos(p, v)), t.map(dir)))
-            .fold(f64::INFINITY, f64::min)
+        per_face(self.tris.len(), |k| {
+            let t = self.tris[k];
+            triangle_zero_step(t.map(|v| self.pos(p, v)), t.map(dir))
+        })
+        .into_iter()
+        .fold(f64::INFINITY, f64::min)
     }
 }
 
@@ -2912,7 +2958,9 @@ fn frobenius(a: [[f64; 2]; 2], b: [[f64; 2]; 2]) -> f64 {
 /// the fragmented inputs' thousands of small islands took no longer, and their scores moved by
 /// the other rounding's later choices (−0.0003 to −0.0005, BENCHMARKS.md). It runs sequentially
 /// (`Par::Seq`) inside each island, as islands are solved in parallel, so the result does not
-/// depend on the thread count.
+/// depend on the thread count. Tried and left: faer's parallel factorisation (`Par::rayon`, the
+/// `rayon` feature) gave the same bits on the horse but made `injective` slower (6.0 s against
+/// 4.5–5.1 s; these systems' supernodes are too small to share).
 struct Pattern {
     matrix: SparseColMat<usize, f64>,
     /// Per triangle, the value index of each `(x, y)` pair of its 6 local unknowns (`u` of
@@ -2954,7 +3002,8 @@ impl Pattern {
             (v < n).then_some((a / 3) * n + v)
         };
         let slots = triangles
-            .iter()
+            .par_iter()
+            .with_min_len(FACES_PER_TASK)
             .map(|c| {
                 let mut s = [[usize::MAX; 6]; 6];
                 for (a, slots_a) in s.iter_mut().enumerate() {
@@ -3035,7 +3084,7 @@ impl UnknownGraph {
                 }
             }
         }
-        pairs.sort_unstable();
+        pairs.par_sort_unstable();
         pairs.dedup();
         let mut start = vec![0usize; n + 1];
         for &p in &pairs {
@@ -3118,12 +3167,14 @@ impl UnknownGraph {
     }
 }
 
-/// The SLIM global step's system: the island's pattern (fixed for the whole run), the pattern
+/// The SLIM global step's system: the island's pattern (fixed for the whole run, built when first needed), the pattern
 /// with the current scaffold's triangles (kept as long as the scaffold is), the glue, and the
 /// proximal weight.
 struct SlimSystem {
-    /// The island's faces alone, on the glued unknowns.
-    island: Pattern,
+    /// The island's faces alone, on the glued unknowns; built by the first
+    /// [`SlimSystem::global`], as most solves never call it (every round has a scaffold), and a
+    /// pattern's symbolic factorisation costs about what a numeric one does.
+    island: Option<Pattern>,
     /// The island's faces followed by the scaffold's triangles, for the scaffold it was built for.
     with_scaffold: Option<Pattern>,
     /// Per unknown, the unknown it moves with (`Patch::coincident_boundary`): faces are assembled
@@ -3138,12 +3189,10 @@ struct SlimSystem {
 }
 
 impl SlimSystem {
-    fn new(patch: &Patch, glue: Vec<u32>, terms: Terms) -> Option<SlimSystem> {
-        let faces: Vec<[u32; 3]> = glued_faces(patch, &glue).map(|(c, _)| c).collect();
-        let island = Pattern::new(patch.n, &faces)?;
+    fn new(patch: &Patch, glue: Vec<u32>, terms: Terms) -> SlimSystem {
         let live = patch.live().count().max(1);
         let proximal = 1e-4 * patch.live().map(|(t, _)| patch.rest[t].weight).sum::<f64>() / live as f64;
-        Some(SlimSystem { island, with_scaffold: None, glue, proximal, terms })
+        SlimSystem { island: None, with_scaffold: None, glue, proximal, terms }
     }
 
     /// Forgets the scaffold's pattern: the next [`SlimSystem::global_scaffold`] builds one for
@@ -3155,8 +3204,13 @@ impl SlimSystem {
     /// The global step at `p`: the positions minimising `Σ_t A_t ‖W_t (J_t − R_t)‖² +
     /// proximal ‖q − p‖²`, with SLIM's weights `W_t` and rotations `R_t` of `p`.
     fn global(&mut self, patch: &Patch, p: &[[f64; 2]]) -> Option<Vec<[f64; 2]>> {
+        if self.island.is_none() {
+            let faces: Vec<[u32; 3]> = glued_faces(patch, &self.glue).map(|(c, _)| c).collect();
+            self.island = Some(Pattern::new(patch.n, &faces)?);
+        }
+        let pattern = self.island.as_mut().expect("built above");
         let faces = glued_faces(patch, &self.glue);
-        let x = solve(&mut self.island, patch.n, self.proximal, self.terms, p, faces, &[])?;
+        let x = solve(pattern, patch.n, self.proximal, self.terms, p, faces, &[])?;
         self.unglued(&x)
     }
 
@@ -3208,8 +3262,46 @@ fn solve<'r>(
     let mut rhs = Mat::<f64>::zeros(2 * n, 1);
     let vals = pattern.matrix.val_mut();
     vals.iter_mut().for_each(|v| *v = 0.0);
-    for ((verts, rest), slots) in triangles.zip(&pattern.slots) {
-        let face = slim_terms(rest, verts.map(pos), rest.terms(terms))?;
+    let triangles: Vec<([u32; 3], &Rest)> = triangles.collect();
+    let mut faces = Vec::with_capacity(ASSEMBLY_BLOCK.min(triangles.len()));
+    for (block, slots) in triangles.chunks(ASSEMBLY_BLOCK).zip(pattern.slots.chunks(ASSEMBLY_BLOCK)) {
+        block
+            .par_iter()
+            .with_min_len(FACES_PER_TASK)
+            .map(|&(verts, rest)| slim_terms(rest, verts.map(pos), rest.terms(terms)))
+            .collect_into_vec(&mut faces);
+        assemble(block, slots, &faces, n, fixed, &mut rhs, vals)?;
+    }
+    for (i, q) in p.iter().enumerate() {
+        rhs[(i, 0)] += proximal * q[0];
+        rhs[(n + i, 0)] += proximal * q[1];
+    }
+    for &d in &pattern.diagonal {
+        vals[d] += proximal;
+    }
+    pattern.solve_in_place(&mut rhs)?;
+    Some(rhs)
+}
+
+/// Triangles whose SLIM terms [`solve`] computes (in parallel) before adding them into the
+/// system (in order): a block's terms take ~1.5 MB, where the whole island's would take 340
+/// bytes a face.
+const ASSEMBLY_BLOCK: usize = 8 * FACES_PER_TASK;
+
+/// Adds the terms `faces` of the triangles `block` (each with its `slots`, a corner `n + k` the
+/// fixed point `fixed[k]`) into the system's values and right-hand side, in order; `None` at
+/// the first triangle whose terms are not finite.
+fn assemble(
+    block: &[([u32; 3], &Rest)],
+    slots: &[[[usize; 6]; 6]],
+    faces: &[Option<FaceRows>],
+    n: usize,
+    fixed: &[[f64; 2]],
+    rhs: &mut Mat<f64>,
+    vals: &mut [f64],
+) -> Option<()> {
+    for (((verts, rest), slots), face) in block.iter().zip(slots).zip(faces) {
+        let face = face.as_ref()?;
         for (a, target) in face.iter() {
             let fixed_part: f64 = (0..6)
                 .filter(|&y| verts[y % 3] as usize >= n)
@@ -3230,15 +3322,7 @@ fn solve<'r>(
             }
         }
     }
-    for (i, q) in p.iter().enumerate() {
-        rhs[(i, 0)] += proximal * q[0];
-        rhs[(n + i, 0)] += proximal * q[1];
-    }
-    for &d in &pattern.diagonal {
-        vals[d] += proximal;
-    }
-    pattern.solve_in_place(&mut rhs)?;
-    Some(rhs)
+    Some(())
 }
 
 #[cfg(test)]
@@ -3603,7 +3687,7 @@ mod tests {
         let patch = Patch::new(&ctx, &faces);
         let p0 = patch.current(&ctx).unwrap();
         let glue = patch.coincident_boundary(&p0);
-        let mut kept = SlimSystem::new(&patch, glue.clone(), Terms::default()).unwrap();
+        let mut kept = SlimSystem::new(&patch, glue.clone(), Terms::default());
         let sc0 = Scaffold::build(&patch, &p0, &glue).unwrap();
         let step0 = kept.global_scaffold(&patch, &p0, &sc0).unwrap();
         let island0 = kept.global(&patch, &p0).unwrap();
@@ -3612,7 +3696,7 @@ mod tests {
         let sc1 = Scaffold::build(&patch, &p0, &glue).unwrap().rested(&p1).unwrap();
         let step1 = kept.global_scaffold(&patch, &p1, &sc1).unwrap();
         let island1 = kept.global(&patch, &p1).unwrap();
-        let mut fresh = SlimSystem::new(&patch, glue, Terms::default()).unwrap();
+        let mut fresh = SlimSystem::new(&patch, glue, Terms::default());
         assert_eq!(step1, fresh.global_scaffold(&patch, &p1, &sc1).unwrap());
         assert_eq!(island1, fresh.global(&patch, &p1).unwrap());
         // The two rounds did solve different systems.
@@ -3687,6 +3771,65 @@ mod tests {
             }
         }
         TriMesh { positions, uv: Some(UvLayer { coords, triangles: triangles.clone() }), triangles }
+    }
+
+    /// Islands are taken largest first, but each result lands at its island's place, computed
+    /// once: as a sequential map in order gives them.
+    #[test]
+    fn largest_first_returns_every_island_in_its_place() {
+        let sizes = [3usize, 40, 1, 40, 7, 0, 12, 5, 90, 2];
+        let islands: Vec<Vec<u32>> = sizes
+            .iter()
+            .enumerate()
+            .map(|(i, &n)| (0..n as u32).map(|f| 1000 * i as u32 + f).collect())
+            .collect();
+        let calls = AtomicUsize::new(0);
+        let got = largest_first(&islands, |faces| {
+            calls.fetch_add(1, Ordering::Relaxed);
+            (faces.len(), faces.first().copied())
+        });
+        let expected: Vec<(usize, Option<u32>)> =
+            islands.iter().map(|f| (f.len(), f.first().copied())).collect();
+        assert_eq!(got, expected);
+        assert_eq!(calls.load(Ordering::Relaxed), islands.len());
+        assert!(largest_first(&[], |f: &[u32]| f.len()).is_empty());
+    }
+
+    /// Two islands, one large enough that SLIM's per-face loops split into several tasks
+    /// ([`FACES_PER_TASK`]), solved in pools of 1, 2 and 3 threads: the same UVs to the bit and
+    /// the same report. A sum or assembly taken in the tasks' order of completion, or a result
+    /// put in the order islands finish, would differ between them.
+    #[test]
+    fn islands_solve_to_the_same_bits_on_any_thread_count() {
+        let big =
+            strip(64, 48, |s, t| [s, t, 0.4 * (s * s + t * t)], |s, t| [s + 0.3 * s * t, t + 0.1 * s * s]);
+        let small = strip(12, 6, |s, t| [s + 3.0, t, 0.3 * s * t], |s, t| [s * s + 5.0, t]);
+        assert!(big.triangles.len() > 2 * FACES_PER_TASK);
+        let offset = big.positions.len() as u32;
+        let (bu, su) = (big.uv.as_ref().unwrap(), small.uv.as_ref().unwrap());
+        let shift = |t: &[u32; 3]| t.map(|v| v + offset);
+        let mesh = TriMesh {
+            positions: big.positions.iter().chain(&small.positions).copied().collect(),
+            triangles: big.triangles.iter().copied().chain(small.triangles.iter().map(shift)).collect(),
+            uv: Some(UvLayer {
+                coords: bu.coords.iter().chain(&su.coords).copied().collect(),
+                triangles: bu.triangles.iter().copied().chain(su.triangles.iter().map(shift)).collect(),
+            }),
+        };
+        let solved: Vec<Injective> = [1, 2, 3]
+            .map(|threads| {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+                pool.install(|| make_injective(&mesh, &InjectiveOptions::default()).unwrap())
+            })
+            .into();
+        assert!(solved[0].report.rounds > 2, "SLIM ran: {:?}", solved[0].report);
+        for other in &solved[1..] {
+            assert_eq!(other.report, solved[0].report);
+            let (a, b) = (other.mesh.uv.as_ref().unwrap(), solved[0].mesh.uv.as_ref().unwrap());
+            assert_eq!(a.triangles, b.triangles);
+            let bits = |l: &UvLayer| l.coords.iter().map(|c| c.map(f32::to_bits)).collect::<Vec<_>>();
+            assert_eq!(bits(a), bits(b));
+        }
     }
 
     /// Flipped and overlapping faces of `mesh` after packing its islands apart.
