@@ -83,7 +83,8 @@
 //! (islands are prepared and footprints rasterised in parallel but kept in island order, islands
 //! are placed one after the other; no hashing order; ties broken by index).
 
-use std::collections::HashMap;
+use foldhash::{HashMap, HashMapExt};
+use std::sync::Arc;
 
 use rayon::prelude::*;
 
@@ -92,7 +93,9 @@ use nuvo_geometry::{TriMesh, UvLayer};
 
 use crate::error::AtlasError;
 use crate::geom::to_dvec3;
-use crate::uvstats::{DEGENERATE_AREA_REL, degenerate_3d_faces, face_uv_area2, require_uv, uv_charts};
+use crate::uvstats::{
+    DEGENERATE_AREA_REL, MeshEdges, degenerate_3d_faces, face_uv_area2, require_uv, uv_charts,
+};
 
 mod shapes;
 use shapes::{Rule, ShapePlaced};
@@ -244,8 +247,16 @@ impl ScaleTest {
     ) -> Result<(Self, Option<IslandCache>), AtlasError> {
         let uv = require_uv(mesh)?;
         check_options(opts)?;
-        let (island_of_face, n) = uv_charts(mesh, uv);
+        let edges = cache.map(|c| match &c.edges {
+            Some(edges) if edges.fit(mesh) => Arc::clone(edges),
+            _ => Arc::new(MeshEdges::of(mesh)),
+        });
+        let (island_of_face, n) = match &edges {
+            Some(edges) => edges.uv_charts(mesh, uv),
+            None => uv_charts(mesh, uv),
+        };
         let (layout, next) = Layout::of_cached(mesh, uv, &island_of_face, n, opts.rotate, cache);
+        let next = next.map(|next| IslandCache { edges, ..next });
         let orders = ShapeOrders::of(&layout.islands);
         Ok((ScaleTest { layout, orders, opts: *opts }, next))
     }
@@ -283,6 +294,9 @@ pub struct IslandCache {
     entries: HashMap<Vec<u32>, CachedIsland>,
     /// Islands taken from the cache so far.
     hits: usize,
+    /// The mesh's edge uses, which find the islands of each layout: reused while the triangles
+    /// are the same (a cut changes only the UV layer), shared by trials run at once.
+    edges: Option<Arc<MeshEdges>>,
 }
 
 impl IslandCache {
@@ -344,6 +358,7 @@ impl Layout {
         rotate: bool,
         reuse: Option<&IslandCache>,
     ) -> (Self, Option<IslandCache>) {
+        // Maps here are only looked up (never iterated): a fast hasher changes nothing else.
         let mut index: HashMap<(u32, u32), u32> = HashMap::with_capacity(uv.coords.len());
         let mut coords = Vec::with_capacity(uv.coords.len());
         let mut members: Vec<Vec<u32>> = vec![Vec::new(); n];
@@ -351,19 +366,34 @@ impl Layout {
         let mut area_3d = vec![0.0f64; n];
         let mut metrics: Vec<Vec<[f64; 3]>> = vec![Vec::new(); n];
         let degenerate_3d = degenerate_3d_faces(mesh);
+        // Each face's areas and metric computed in parallel, summed into its island in face
+        // order below: the same sums as one loop, and the necks pass prepares a layout per trial
+        // (this loop alone was a fifth of the horse's pass).
+        let per_face: Vec<(f64, f64, Option<[f64; 3]>)> = (0..uv.triangles.len())
+            .into_par_iter()
+            .map(|f| {
+                let [a, b, c] = mesh.corners(f).map(to_dvec3);
+                let t = uv.triangles[f].map(|j| uv.coords[j as usize]);
+                (
+                    face_uv_area2(uv, f).abs() * 0.5,
+                    0.5 * (b - a).cross(c - a).length(),
+                    face_metric([a, b, c], t),
+                )
+            })
+            .collect();
         let triangles: Vec<[u32; 3]> = uv
             .triangles
             .iter()
             .enumerate()
             .map(|(f, t)| {
                 let i = island_of_face[f];
+                let (face_area_uv, face_area_3d, metric) = per_face[f];
                 // A face without 3-D area has no texel density to match (module docs).
                 if !degenerate_3d[f] {
-                    area_uv[i as usize] += face_uv_area2(uv, f).abs() * 0.5;
+                    area_uv[i as usize] += face_area_uv;
                 }
-                let [a, b, c] = mesh.corners(f).map(to_dvec3);
-                area_3d[i as usize] += 0.5 * (b - a).cross(c - a).length();
-                if let Some(g) = face_metric([a, b, c], t.map(|j| uv.coords[j as usize])) {
+                area_3d[i as usize] += face_area_3d;
+                if let Some(g) = metric {
                     metrics[i as usize].push(g);
                 }
                 t.map(|old| {
@@ -429,7 +459,7 @@ impl Layout {
                     (f, CachedIsland { points: points.clone(), rotate, outlined, island: island.clone() })
                 })
                 .collect();
-            IslandCache { entries, hits }
+            IslandCache { entries, hits, edges: None }
         });
         let islands = prepared.into_iter().map(|(island, ..)| island).collect();
         (Self { islands, coords, triangles }, next)
@@ -653,11 +683,21 @@ pub(crate) fn rotated(p: [f64; 2], rot: [f64; 2]) -> [f64; 2] {
     [rot[0] * p[0] - rot[1] * p[1], rot[1] * p[0] + rot[0] * p[1]]
 }
 
+/// Points from which [`convex_hull`] sorts in parallel.
+const HULL_PARALLEL_POINTS: usize = 4096;
+
 /// Convex hull, counter-clockwise, without collinear points (Andrew's monotone chain). Fewer than
 /// three points, or collinear ones, give their extreme points.
 pub(crate) fn convex_hull(points: &[[f64; 2]]) -> Vec<[f64; 2]> {
     let mut p = points.to_vec();
-    p.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    // Points equal under this order are the same bits, so an unstable sort leaves the same
+    // sequence; in parallel for a large island (a neck cut's parts, prepared one a trial).
+    let by_x_then_y = |a: &[f64; 2], b: &[f64; 2]| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1]));
+    if p.len() >= HULL_PARALLEL_POINTS {
+        p.par_sort_unstable_by(by_x_then_y);
+    } else {
+        p.sort_unstable_by(by_x_then_y);
+    }
     p.dedup();
     if p.len() < 3 {
         return p;

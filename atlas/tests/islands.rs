@@ -332,8 +332,16 @@ fn a_cached_scale_test_answers_as_a_fresh_one_and_reuses_only_unchanged_islands(
             rect(1.0, 1.0, 2.0, [0.5, 0.5], 0.1, 0.0),
         ])
     };
-    let layouts =
-        [layout([0.0, 0.5], 0.0), layout([0.7, 0.1], 30.0), layout([0.0, 0.5], 0.0), layout([9.0, 9.0], 0.0)];
+    // The fifth is another mesh (other triangles): the mesh's edges, kept in the cache to find
+    // the islands, must be found anew.
+    let other_mesh = mesh(&[rect(1.0, 1.0, 2.0, [0.5, 0.5], 0.1, 0.0), l_island(0.0)]);
+    let layouts = [
+        layout([0.0, 0.5], 0.0),
+        layout([0.7, 0.1], 30.0),
+        layout([0.0, 0.5], 0.0),
+        layout([9.0, 9.0], 0.0),
+        other_mesh,
+    ];
     let o = opts(256, 2, true);
     let mut cache = IslandCache::default();
     let mut hits = Vec::new();
@@ -348,8 +356,9 @@ fn a_cached_scale_test_answers_as_a_fresh_one_and_reuses_only_unchanged_islands(
         }
         hits.push(cache.hits());
     }
-    // The first layout prepares all three; each later one reuses the two it shares with the last.
-    assert_eq!(hits, [0, 2, 4, 6]);
+    // The first layout prepares all three; each later one reuses the two it shares with the
+    // last; the other mesh's islands are other faces.
+    assert_eq!(hits, [0, 2, 4, 6, 6]);
 }
 
 #[test]

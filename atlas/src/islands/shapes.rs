@@ -46,7 +46,7 @@
 //! Deterministic: orientations are searched in parallel (rayon) but chosen by the fixed order
 //! above, islands are placed sequentially.
 
-use std::collections::HashMap;
+use foldhash::{HashMap, HashMapExt};
 
 use rayon::prelude::*;
 
@@ -124,7 +124,8 @@ impl Outline {
             return None;
         }
         // Net count of each undirected edge, positive in the direction from the lower index.
-        let mut net: HashMap<(u32, u32), i64> = HashMap::new();
+        // A fast hasher: the map is only looked up, `order` keeps the edges' order.
+        let mut net: HashMap<(u32, u32), i64> = HashMap::with_capacity(3 * tris.len() / 2 + 3);
         let mut order: Vec<(u32, u32)> = Vec::new();
         for t in tris {
             for k in 0..3 {
