@@ -1686,18 +1686,10 @@ impl Patch {
     }
 
     /// The adjacency lists of the live faces' edges, each edge with its rest length in the first
-    /// face (in face order) that uses it, and listed in the order the faces first reach it.
-    /// Found by sorting the edges' uses rather than through a map: `cut_to_disc` asks once a
-    /// hole, on the whole patch (the unruly vase's `injective` spent 7% of its time here).
+    /// face (in face order) that uses it, and listed in the order the faces first reach it
+    /// ([`sorted_edge_uses`]).
     fn edge_graph(&self) -> Adjacency {
-        let mut uses: Vec<(u64, u32, u8)> = Vec::with_capacity(3 * self.corners.len());
-        for (t, c) in self.live() {
-            for k in 0..3 {
-                let (a, b) = (c[k], c[(k + 1) % 3]);
-                uses.push((u64::from(a.min(b)) << 32 | u64::from(a.max(b)), t as u32, k as u8));
-            }
-        }
-        uses.sort_unstable();
+        let uses = sorted_edge_uses(&self.corners, &self.collapsed);
         let mut first: Vec<(u32, u8)> = uses.chunk_by(|x, y| x.0 == y.0).map(|e| (e[0].1, e[0].2)).collect();
         first.sort_unstable();
         let mut adj: Adjacency = vec![Vec::new(); self.n];
@@ -2303,6 +2295,23 @@ fn far_apart(adj: &[Vec<u32>]) -> (u32, u32, Vec<u32>) {
     (a, b, from_a)
 }
 
+/// Every edge of the faces not `collapsed` as `(low << 32 | high, face, edge)`, sorted: the uses
+/// of one edge are adjacent, in face order. Why sorted and not a map of lists: `cut_to_disc`
+/// asks [`separate_fans`] and [`Patch::edge_graph`] once a hole, on the whole patch, and a
+/// marching-cubes island has hundreds of holes (with maps of lists the two were 15% and 7% of
+/// the unruly vase's `injective`).
+fn sorted_edge_uses(corners: &[[u32; 3]], collapsed: &[bool]) -> Vec<(u64, u32, u8)> {
+    let mut uses: Vec<(u64, u32, u8)> = Vec::with_capacity(3 * corners.len());
+    for (t, c) in corners.iter().enumerate().filter(|(t, _)| !collapsed[*t]) {
+        for k in 0..3 {
+            let (a, b) = (c[k], c[(k + 1) % 3]);
+            uses.push((u64::from(a.min(b)) << 32 | u64::from(a.max(b)), t as u32, k as u8));
+        }
+    }
+    uses.sort_unstable();
+    uses
+}
+
 /// `corners` with every unknown whose live faces form several fans given one unknown per fan:
 /// the first fan (in face order) keeps it, the others get new ones. Two faces are in one fan of
 /// an unknown when they are joined across an edge at it that exactly two live faces use, in
@@ -2315,20 +2324,7 @@ fn separate_fans(
     n: usize,
     cut: &HashSet<(u32, u32)>,
 ) -> (Vec<[u32; 3]>, usize) {
-    // Every live face's edges as `(low << 32 | high, face, edge)`, sorted: the uses of one edge
-    // are adjacent, in face order. Why sorted and not a map of lists: `cut_to_disc` calls this
-    // once a hole, on the whole patch, and a marching-cubes island has hundreds of holes (the
-    // unruly vase's `injective` spent 15% of its time in this function with a map of lists).
-    let mut uses: Vec<(u64, u32, u8)> = Vec::with_capacity(3 * corners.len());
-    for (t, c) in corners.iter().enumerate() {
-        if !collapsed[t] {
-            for k in 0..3 {
-                let (a, b) = (c[k], c[(k + 1) % 3]);
-                uses.push((u64::from(a.min(b)) << 32 | u64::from(a.max(b)), t as u32, k as u8));
-            }
-        }
-    }
-    uses.sort_unstable();
+    let uses = sorted_edge_uses(&corners, collapsed);
     // The corner of face `f` at unknown `x`, `f`'s edge `k` having `x` as an end.
     let corner_at = |corners: &[[u32; 3]], f: u32, k: usize, x: u32| -> u32 {
         let j = if corners[f as usize][k] == x { k } else { (k + 1) % 3 };
