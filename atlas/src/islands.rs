@@ -83,9 +83,9 @@
 //! (islands are prepared and footprints rasterised in parallel but kept in island order, islands
 //! are placed one after the other; no hashing order; ties broken by index).
 
-use foldhash::{HashMap, HashMapExt};
 use std::sync::Arc;
 
+use foldhash::{HashMap, HashMapExt};
 use rayon::prelude::*;
 
 use glam::DVec3;
