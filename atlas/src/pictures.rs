@@ -19,7 +19,7 @@ use crate::error::write_atomic;
 use crate::font::{GLYPH, draw_text};
 use crate::geom::to_dvec3;
 use crate::pack::AtlasLayout;
-use crate::raster::raster_parallel;
+use crate::raster::{Sampling, raster_parallel};
 use crate::render::render;
 use crate::uvstats::{require_uv, uv_charts, uv_pixels};
 
@@ -69,6 +69,7 @@ pub fn uv_layout(
         r,
         &mut texels,
         uv.triangles.len(),
+        Sampling::Exact,
         |f| Some(uv_pixels(uv, f, r)),
         |t, f, l| {
             if t.first == u32::MAX {

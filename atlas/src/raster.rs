@@ -5,10 +5,14 @@
 //!
 //! **Coverage rule.** Vertices are snapped to 1/256 pixel (fixed point) and edge functions are
 //! evaluated exactly in integers, with a tie-breaking rule equivalent to nudging every sample point by
-//! the same infinitesimal offset. Consequence (relied on by overlap counting): in a mesh without
-//! overlaps every pixel centre is covered by **exactly one** triangle, even centres lying exactly on
-//! a shared edge or vertex. Triangles of zero area cover nothing; orientation does not matter (back
-//! faces are rasterised).
+//! the same infinitesimal offset. Consequence: in a mesh without overlaps every pixel centre is
+//! covered by **exactly one** triangle, even centres lying exactly on a shared edge or vertex, as
+//! long as snapping makes no overlap — and it can: two faces a hair apart (two edges 10⁻⁴ pixel
+//! apart along a seam of a marching-cubes mesh's slivers) may both cover a centre once snapped.
+//! So counting which faces cover a texel ([`crate::uvstats`]' overlaps and utilisation) takes
+//! [`Sampling::Exact`]: the same rule on the unsnapped coordinates, decided by exact predicates
+//! ([`robust::orient2d`]), where no two faces whose interiors are disjoint ever share a centre.
+//! Triangles of zero area cover nothing; orientation does not matter (back faces are rasterised).
 //!
 //! **Determinism.** [`raster_parallel`] splits the image into bands of rows processed in parallel;
 //! inside a band, triangles are visited in increasing index order, so an order-dependent per-pixel
@@ -97,6 +101,83 @@ pub(crate) fn rasterize_triangle(
     }
 }
 
+/// Calls `visit(x, y, l)` for every pixel centre of columns `0..width` and rows `rows` covered by
+/// the triangle `v`, as [`rasterize_triangle`] does but on `v`'s own coordinates: a centre is
+/// covered when it lies strictly inside every edge, or on an edge that owns its ties (the same
+/// rule as there), each side decided exactly ([`robust::orient2d`]). So two triangles whose
+/// interiors are disjoint never both cover a centre, and two that share an edge (the same
+/// coordinates at both ends) cover each centre on it once. `l` are the centre's barycentrics
+/// (rounded). Triangles of zero area or with a coordinate that is not finite cover nothing.
+pub(crate) fn rasterize_triangle_exact(
+    v: Tri2,
+    width: u32,
+    rows: Range<u32>,
+    mut visit: impl FnMut(u32, u32, [f32; 3]),
+) {
+    if v.iter().flatten().any(|c| !c.is_finite()) {
+        return;
+    }
+    let mut p: [[f64; 2]; 3] = v.map(|q| q.map(f64::from));
+    let orient = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
+        robust::orient2d(
+            robust::Coord { x: a[0], y: a[1] },
+            robust::Coord { x: b[0], y: b[1] },
+            robust::Coord { x: c[0], y: c[1] },
+        )
+    };
+    let mut order = [0usize, 1, 2];
+    let area = orient(p[0], p[1], p[2]);
+    if area == 0.0 {
+        return;
+    }
+    if area < 0.0 {
+        p.swap(1, 2);
+        order.swap(1, 2);
+    }
+    let (xs, ys) = (p.map(|q| q[0]), p.map(|q| q[1]));
+    let min = |a: [f64; 3]| a[0].min(a[1]).min(a[2]);
+    let max = |a: [f64; 3]| a[0].max(a[1]).max(a[2]);
+    // Centres `c + ½` within the bounding box, clipped to the image before any cast.
+    let first = |m: f64, lo: f64| (m - 0.5).ceil().max(lo);
+    let last = |m: f64, hi: f64| (m - 0.5).floor().min(hi);
+    let (x0, x1) = (first(min(xs), 0.0), last(max(xs), width as f64 - 1.0));
+    let (y0, y1) = (first(min(ys), rows.start as f64), last(max(ys), rows.end as f64 - 1.0));
+    if !(x0 <= x1 && y0 <= y1) {
+        return;
+    }
+    // Edge k is opposite vertex k, from p[k+1] to p[k+2]; inside is its left (positive) side.
+    let edges: [([f64; 2], [f64; 2]); 3] = std::array::from_fn(|k| (p[(k + 1) % 3], p[(k + 2) % 3]));
+    let owns_ties = edges.map(|(a, b)| {
+        let d = [b[0] - a[0], b[1] - a[1]];
+        d[1] < 0.0 || (d[1] == 0.0 && d[0] > 0.0)
+    });
+    let inv_area = 1.0 / area.abs();
+    for y in y0 as u32..=y1 as u32 {
+        for x in x0 as u32..=x1 as u32 {
+            let c = [x as f64 + 0.5, y as f64 + 0.5];
+            let e = edges.map(|(a, b)| orient(a, b, c));
+            if (0..3).all(|k| e[k] > 0.0 || (e[k] == 0.0 && owns_ties[k])) {
+                let mut l = [0f32; 3];
+                for k in 0..3 {
+                    l[order[k]] = (e[k] * inv_area) as f32;
+                }
+                visit(x, y, l);
+            }
+        }
+    }
+}
+
+/// How [`raster_parallel`] decides which pixel centres a triangle covers (module docs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Sampling {
+    /// Vertices snapped to 1/256 pixel, integer edge functions ([`rasterize_triangle`]): for
+    /// pictures, where a centre shared by two faces a hair apart does not matter.
+    Snapped,
+    /// The triangles' own coordinates, exact predicates ([`rasterize_triangle_exact`]): for
+    /// counting which faces cover a pixel.
+    Exact,
+}
+
 /// Rasterises triangles `0..count` into `pixels` (`width × height`, row-major), calling
 /// `shade(pixel, triangle, barycentrics)` for every covered pixel. `vertices(i)` gives triangle
 /// `i` in pixel space, or `None` to skip it. Parallel over bands of rows, deterministic (module docs).
@@ -105,6 +186,7 @@ pub(crate) fn raster_parallel<P: Send>(
     height: u32,
     pixels: &mut [P],
     count: usize,
+    sampling: Sampling,
     vertices: impl Fn(usize) -> Option<Tri2> + Sync,
     shade: impl Fn(&mut P, usize, [f32; 3]) + Sync,
 ) {
@@ -135,9 +217,12 @@ pub(crate) fn raster_parallel<P: Send>(
         for &i in bins.iter().flat_map(|chunk| &chunk[b]) {
             let i = i as usize;
             if let Some(v) = vertices(i) {
-                rasterize_triangle(v, width, rows.clone(), |x, y, l| {
-                    shade(&mut band[(y as usize - y0) * w + x as usize], i, l)
-                });
+                let visit =
+                    |x: u32, y: u32, l: [f32; 3]| shade(&mut band[(y as usize - y0) * w + x as usize], i, l);
+                match sampling {
+                    Sampling::Snapped => rasterize_triangle(v, width, rows.clone(), visit),
+                    Sampling::Exact => rasterize_triangle_exact(v, width, rows.clone(), visit),
+                }
             }
         }
     });
@@ -242,29 +327,145 @@ mod tests {
             })
             .collect();
         let (w, h) = (70u32, 90u32);
-        let mut first = vec![u32::MAX; (w * h) as usize];
-        raster_parallel(
-            w,
-            h,
-            &mut first,
-            tris.len(),
-            |i| Some(tris[i]),
-            |p, i, _| {
-                if *p == u32::MAX {
-                    *p = i as u32
+        for sampling in [Sampling::Snapped, Sampling::Exact] {
+            let mut first = vec![u32::MAX; (w * h) as usize];
+            raster_parallel(
+                w,
+                h,
+                &mut first,
+                tris.len(),
+                sampling,
+                |i| Some(tris[i]),
+                |p, i, _| {
+                    if *p == u32::MAX {
+                        *p = i as u32
+                    }
+                },
+            );
+            let mut serial = vec![u32::MAX; (w * h) as usize];
+            for (i, &t) in tris.iter().enumerate() {
+                let visit = |x: u32, y: u32, _| {
+                    let p = &mut serial[(y * w + x) as usize];
+                    if *p == u32::MAX {
+                        *p = i as u32
+                    }
+                };
+                match sampling {
+                    Sampling::Snapped => rasterize_triangle(t, w, 0..h, visit),
+                    Sampling::Exact => rasterize_triangle_exact(t, w, 0..h, visit),
                 }
-            },
-        );
-        let mut serial = vec![u32::MAX; (w * h) as usize];
-        for (i, &t) in tris.iter().enumerate() {
-            rasterize_triangle(t, w, 0..h, |x, y, _| {
-                let p = &mut serial[(y * w + x) as usize];
-                if *p == u32::MAX {
-                    *p = i as u32
-                }
-            });
+            }
+            assert_eq!(first, serial, "{sampling:?}");
         }
-        assert_eq!(first, serial);
+    }
+
+    fn exact_coverage(tris: &[Tri2], w: u32, h: u32) -> Vec<u32> {
+        let mut count = vec![0u32; (w * h) as usize];
+        for &t in tris {
+            rasterize_triangle_exact(t, w, 0..h, |x, y, _| count[(y * w + x) as usize] += 1);
+        }
+        count
+    }
+
+    /// Two faces that share a vertex and lie on either side of a thin wedge (their near-parallel
+    /// edges 10⁻³·⁵–10⁻¹·⁵ pixel apart at their far ends, as along a marching-cubes mesh's slivers): their interiors
+    /// are disjoint, so exact sampling never lets both cover a centre; snapped sampling can (the
+    /// pair from a real atlas at the end: why counting takes exact sampling).
+    #[test]
+    fn faces_a_hair_apart_never_share_a_centre_when_sampled_exactly() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let (w, h) = (24u32, 24u32);
+        let mut cases = 0;
+        for _ in 0..3000 {
+            let s = [rng.random_range(4.0..20.0f64), rng.random_range(4.0..20.0f64)];
+            let angle = rng.random_range(0.0..std::f64::consts::TAU);
+            let length = rng.random_range(2.0..8.0);
+            // The gap at the far end, in pixels; the second edge turned clockwise by it.
+            let gap = 10f64.powf(rng.random_range(-3.5..-1.5));
+            let turn = gap / length;
+            let dir = |a: f64| [a.cos(), a.sin()];
+            let (d1, d2) = (dir(angle), dir(angle - turn));
+            let at = |d: [f64; 2], t: f64| [s[0] + d[0] * t, s[1] + d[1] * t];
+            let left = dir(angle + 1.2);
+            let right = dir(angle - turn - 1.2);
+            let f = |p: [f64; 2]| p.map(|x| x as f32);
+            let a: Tri2 = [f(s), f(at(d1, length)), f(at(left, length))];
+            let b: Tri2 = [f(s), f(at(right, length)), f(at(d2, length))];
+            // f32 rounding may close the wedge: keep only the pairs still apart in f32, checked
+            // exactly (the far ends on the right sides of each other's edge).
+            let side = |o: [f32; 2], e: [f32; 2], q: [f32; 2]| {
+                robust::orient2d(
+                    robust::Coord { x: o[0] as f64, y: o[1] as f64 },
+                    robust::Coord { x: e[0] as f64, y: e[1] as f64 },
+                    robust::Coord { x: q[0] as f64, y: q[1] as f64 },
+                )
+            };
+            if !(side(a[0], a[1], b[2]) < 0.0 && side(b[0], b[2], a[1]) > 0.0) {
+                continue;
+            }
+            cases += 1;
+            let exact = exact_coverage(&[a, b], w, h);
+            assert!(exact.iter().all(|&n| n <= 1), "exact sampling counted an overlap: {a:?} {b:?}");
+        }
+        assert!(cases > 1000, "{cases} cases");
+        // Two faces of an unwrapped marching-cubes bunny (faces 337318 and 337319 of the suite's
+        // `unruly_bunny` atlas, its UVs as written, at 1024²): they share a vertex, and their
+        // near-parallel edges end 0.015 pixel apart. Snapped, both cover the centre of texel
+        // (966, 903); exactly, one does.
+        let px = |u: f32, v: f32| [u * 1024.0, (1.0 - v) * 1024.0];
+        let a: Tri2 = [px(0.94395614, 0.11589566), px(0.94380766, 0.11832395), px(0.9427842, 0.11736916)];
+        let b: Tri2 = [px(0.9446356, 0.11790011), px(0.943809, 0.1183098), px(0.94395614, 0.11589566)];
+        let texel = (903 * 1024 + 966) as usize;
+        assert_eq!(coverage(&[a, b], 1024, 1024)[texel], 2, "snapping no longer overlaps them");
+        assert_eq!(exact_coverage(&[a, b], 1024, 1024)[texel], 1);
+        assert!(exact_coverage(&[a, b], 1024, 1024).iter().all(|&n| n <= 1));
+    }
+
+    /// Two triangles sharing an edge (the same coordinates at both ends) cover every centre of
+    /// their union once, centres exactly on the shared edge included, in either winding.
+    #[test]
+    fn exact_sampling_covers_a_shared_edge_once() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(12);
+        // The diagonal of a square through pixel centres, and random quads split along a diagonal.
+        let mut quads = vec![[[2.5f32, 2.5], [10.5, 2.5], [10.5, 10.5], [2.5, 10.5]]];
+        for _ in 0..200 {
+            let c = [rng.random_range(4.0..12.0f32), rng.random_range(4.0..12.0f32)];
+            let mut r = |k: f32| [c[0] + k * rng.random_range(1.0..4.0f32), c[1]];
+            let (p0, p2) = (r(-1.0), r(1.0));
+            let p1 = [c[0] + rng.random_range(-1.0..1.0f32), c[1] - rng.random_range(1.0..4.0f32)];
+            let p3 = [c[0] + rng.random_range(-1.0..1.0f32), c[1] + rng.random_range(1.0..4.0f32)];
+            quads.push([p0, p1, p2, p3]);
+        }
+        for q in quads {
+            let halves = [[q[0], q[1], q[2]], [q[0], q[2], q[3]]];
+            let c = exact_coverage(&halves, 16, 16);
+            assert!(c.iter().all(|&n| n <= 1), "{q:?}");
+            let flipped: Vec<Tri2> = halves.iter().map(|t| [t[0], t[2], t[1]]).collect();
+            assert_eq!(exact_coverage(&flipped, 16, 16), c, "{q:?}");
+        }
+        // Every centre on the square's diagonal (x = y) is covered once.
+        let q = [[2.5f32, 2.5], [10.5, 2.5], [10.5, 10.5], [2.5, 10.5]];
+        let c = exact_coverage(&[[q[0], q[1], q[2]], [q[0], q[2], q[3]]], 16, 16);
+        assert!((2..10).all(|i| c[(i * 16 + i) as usize] == 1), "{c:?}");
+    }
+
+    #[test]
+    fn exact_sampling_agrees_with_snapped_away_from_edges_and_gives_barycentrics() {
+        let t: Tri2 = [[1.3, 2.1], [17.8, 4.4], [6.2, 15.9]];
+        assert_eq!(exact_coverage(&[t], 20, 20), coverage(&[t], 20, 20));
+        rasterize_triangle_exact(t, 20, 0..20, |x, y, l| {
+            let px = l[0] * t[0][0] + l[1] * t[1][0] + l[2] * t[2][0];
+            let py = l[0] * t[0][1] + l[1] * t[1][1] + l[2] * t[2][1];
+            assert!((px - (x as f32 + 0.5)).abs() < 1e-3 && (py - (y as f32 + 0.5)).abs() < 1e-3);
+        });
+        assert!(exact_coverage(&[[[1.0, 1.0], [5.0, 5.0], [9.0, 9.0]]], 10, 10).iter().all(|&n| n == 0));
+        assert!(exact_coverage(&[[[f32::NAN, 1.0], [5.0, 5.0], [9.0, 1.0]]], 10, 10).iter().all(|&n| n == 0));
+        // Far outside the image: nothing, and no loop over its bounding box.
+        assert!(
+            exact_coverage(&[[[-1e30, -1e30], [1e30, -1e30], [0.0, -1e29]]], 10, 10).iter().all(|&n| n == 0)
+        );
     }
 
     #[test]

@@ -11,7 +11,7 @@ use rayon::prelude::*;
 
 use crate::camera::{Camera, Projector};
 use crate::error::AtlasError;
-use crate::raster::raster_parallel;
+use crate::raster::{Sampling, raster_parallel};
 
 /// The triangle id of a pixel that sees no surface.
 pub const NO_HIT: u32 = u32::MAX;
@@ -81,6 +81,7 @@ pub fn render(mesh: &TriMesh, camera: &Camera) -> Result<GBuffer, AtlasError> {
         camera.height,
         &mut pixels,
         mesh.triangles.len(),
+        Sampling::Snapped,
         |i| corners(i).map(|c| c.map(|q| [q[0], q[1]])),
         |px, i, l| {
             let Some(c) = corners(i) else { return };

@@ -42,7 +42,7 @@ use serde::Serialize;
 
 use crate::error::AtlasError;
 use crate::geom::{signed_area2_2d, to_dvec3};
-use crate::raster::{Tri2, raster_parallel, rasterize_triangle};
+use crate::raster::{Sampling, Tri2, raster_parallel, rasterize_triangle_exact};
 
 /// UV area at or below which a face counts as degenerate in UV (not flipped, not measurable).
 pub const DEGENERATE_UV_AREA: f64 = 1e-12;
@@ -432,7 +432,8 @@ pub(crate) fn uv_to_pixel(p: [f32; 2], r: u32) -> [f32; 2] {
     [p[0] * r as f32, (1.0 - p[1]) * r as f32]
 }
 
-/// How many faces cover each texel of the `r × r` UV raster (saturating at `u16::MAX`).
+/// How many faces cover each texel of the `r × r` UV raster (saturating at `u16::MAX`), each
+/// texel centre decided exactly ([`Sampling::Exact`]): faces a hair apart never share one.
 pub(crate) fn uv_coverage(uv: &UvLayer, r: u32) -> Vec<u16> {
     let mut counts = vec![0u16; r as usize * r as usize];
     raster_parallel(
@@ -440,19 +441,20 @@ pub(crate) fn uv_coverage(uv: &UvLayer, r: u32) -> Vec<u16> {
         r,
         &mut counts,
         uv.triangles.len(),
+        Sampling::Exact,
         |f| Some(uv_pixels(uv, f, r)),
         |c, _, _| *c = c.saturating_add(1),
     );
     counts
 }
 
-/// Faces covering a texel whose count is ≥ 2.
+/// Faces covering a texel whose count is ≥ 2 (centres decided exactly, as in [`uv_coverage`]).
 fn overlapping_faces(uv: &UvLayer, counts: &[u16], r: u32) -> Vec<u32> {
     let flags: Vec<bool> = (0..uv.triangles.len())
         .into_par_iter()
         .map(|f| {
             let mut hit = false;
-            rasterize_triangle(uv_pixels(uv, f, r), r, 0..r, |x, y, _| {
+            rasterize_triangle_exact(uv_pixels(uv, f, r), r, 0..r, |x, y, _| {
                 hit |= counts[(y * r + x) as usize] >= 2;
             });
             hit
@@ -507,6 +509,35 @@ mod tests {
         assert_eq!(a.stats.overlapping_faces, 0);
         assert_eq!(a.stats.flipped_faces, 0);
         assert_eq!(a.stats.degenerate_uv_faces, 0);
+    }
+
+    /// Two faces of a marching-cubes bunny's atlas a hair apart (their UVs as written; the raster
+    /// module's test has the story): not an overlap. Snapped to 1/256 texel, the two were
+    /// counted as overlapping (`nuvo eval` said 2 overlapping faces where there were none).
+    #[test]
+    fn faces_a_hair_apart_are_not_counted_as_overlapping() {
+        let coords = vec![
+            [0.94395614, 0.11589566],
+            [0.94380766, 0.11832395],
+            [0.9427842, 0.11736916],
+            [0.9446356, 0.11790011],
+            [0.943809, 0.1183098],
+        ];
+        let triangles = vec![[0, 1, 2], [3, 4, 0]];
+        let m = TriMesh {
+            positions: coords.iter().map(|&[u, v]| [u, v, 0.0]).collect(),
+            triangles: triangles.clone(),
+            uv: Some(UvLayer { coords, triangles }),
+        };
+        let a = analyse_uv(&m, None, 1024).unwrap();
+        assert_eq!((a.stats.overlapping_faces, a.stats.overlap_fraction), (0, 0.0));
+        // A third face laid on the second (its own copies of the coordinates) does overlap it.
+        let mut laid = m.clone();
+        laid.triangles.push([3, 4, 0]);
+        let uv = laid.uv.as_mut().unwrap();
+        uv.coords.extend([uv.coords[3], uv.coords[4], uv.coords[0]]);
+        uv.triangles.push([5, 6, 7]);
+        assert_eq!(analyse_uv(&laid, None, 1024).unwrap().stats.overlapping_faces, 2);
     }
 
     /// Square texels measure 1 whatever the map's scale and turn; a map twice as long along u as
