@@ -263,12 +263,25 @@ fn edge(a: [i64; 2], b: [i64; 2], c: [i64; 2]) -> i64 {
 mod tests {
     use super::*;
 
-    fn coverage(tris: &[Tri2], w: u32, h: u32) -> Vec<u32> {
+    /// How many of `tris` cover each pixel centre of a `w × h` image, sampled as `sampling` says.
+    fn sampled_coverage(sampling: Sampling, tris: &[Tri2], w: u32, h: u32) -> Vec<u32> {
         let mut count = vec![0u32; (w * h) as usize];
         for &t in tris {
-            rasterize_triangle(t, w, 0..h, |x, y, _| count[(y * w + x) as usize] += 1);
+            let visit = |x: u32, y: u32, _| count[(y * w + x) as usize] += 1;
+            match sampling {
+                Sampling::Snapped => rasterize_triangle(t, w, 0..h, visit),
+                Sampling::Exact => rasterize_triangle_exact(t, w, 0..h, visit),
+            }
         }
         count
+    }
+
+    fn coverage(tris: &[Tri2], w: u32, h: u32) -> Vec<u32> {
+        sampled_coverage(Sampling::Snapped, tris, w, h)
+    }
+
+    fn exact_coverage(tris: &[Tri2], w: u32, h: u32) -> Vec<u32> {
+        sampled_coverage(Sampling::Exact, tris, w, h)
     }
 
     #[test]
@@ -359,18 +372,11 @@ mod tests {
         }
     }
 
-    fn exact_coverage(tris: &[Tri2], w: u32, h: u32) -> Vec<u32> {
-        let mut count = vec![0u32; (w * h) as usize];
-        for &t in tris {
-            rasterize_triangle_exact(t, w, 0..h, |x, y, _| count[(y * w + x) as usize] += 1);
-        }
-        count
-    }
-
     /// Two faces that share a vertex and lie on either side of a thin wedge (their near-parallel
-    /// edges 10⁻³·⁵–10⁻¹·⁵ pixel apart at their far ends, as along a marching-cubes mesh's slivers): their interiors
-    /// are disjoint, so exact sampling never lets both cover a centre; snapped sampling can (the
-    /// pair from a real atlas at the end: why counting takes exact sampling).
+    /// edges 10⁻³·⁵–10⁻¹·⁵ pixel apart at their far ends, as along a marching-cubes mesh's
+    /// slivers): their interiors are disjoint, so exact sampling never lets both cover a centre;
+    /// snapped sampling can (the pair from a real atlas at the end: why counting takes exact
+    /// sampling).
     #[test]
     fn faces_a_hair_apart_never_share_a_centre_when_sampled_exactly() {
         use rand::{Rng, SeedableRng};
