@@ -139,7 +139,9 @@
 //!   parts keep their island's), centred on the input island's UV centroid, or with `split` on
 //!   the origin (`Placement`: f32 then keeps an island's shape to a rounding of its own extent).
 //!   Parts of one island, and with `split` all islands, lie on top of each other: a packing step
-//!   ([`crate::islands`]) must follow, as `split` says.
+//!   ([`crate::islands`]) must follow, as `split` says. Every part is an island of its own in
+//!   the output, read by UVs as the later steps read them: a part that would join another
+//!   along a shared edge (congruent faces mapped alike) is moved beside it (`unstacked`).
 //!
 //! Islands are processed in parallel, largest first (`largest_first`); inside an island, the
 //! per-face work of SLIM (its weights and rotations, energies, injectivity angles, step bounds,
@@ -461,10 +463,70 @@ pub fn make_injective_where(
     report.islands_after = parts_faces.len();
     report.energy_before = if a_before > 0.0 { e_before / a_before } else { 0.0 };
     report.energy_after = if a_after > 0.0 { e_after / a_after } else { 0.0 };
-    let new_corners: Vec<Option<&[[f32; 2]]>> = parts_corners.iter().map(|c| c.as_deref()).collect();
-    let (coords, triangles, _) = write_back(uv, &parts_faces, &new_corners);
-    let out = TriMesh { uv: Some(UvLayer { coords, triangles }), ..mesh.clone() };
+    let layer = unstacked(mesh, uv, &parts_faces, &mut parts_corners);
+    let out = TriMesh { uv: Some(layer), ..mesh.clone() };
     Ok(Injective { mesh: out, report })
+}
+
+/// The output layer of the parts (`faces`, and `corners` when solved: `None` keeps the input
+/// UVs), with every part an island of its own ([`uv_charts`](crate::uvstats::uv_charts)).
+/// Why: the solved parts lie on top of each other (module docs, "Orientation and place"), and
+/// two of them that share a mesh edge come out with equal UVs at both its ends when their faces
+/// are congruent and mapped alike: the two back-to-back pairs of faces a marching-cubes mesh
+/// makes where a wall pinches to one edge (the unruly vase's density grid; 4 overlapping faces
+/// after packing). Read by UVs, as every later step reads islands, the two were one island
+/// folded onto itself. A part that shares an island with an earlier one is moved along `u` by
+/// the sum of its extents, beside where it lay (or, when it keeps its input UVs, the earlier
+/// part is), until no two parts share an island. A part whose UVs are one point covers nothing
+/// and is not moved. Parts that lie apart, nearly always all of them, cost one charting.
+fn unstacked(
+    mesh: &TriMesh,
+    uv: &UvLayer,
+    faces: &[Vec<u32>],
+    corners: &mut [Option<Vec<[f32; 2]>>],
+) -> UvLayer {
+    let layer_of = |corners: &[Option<Vec<[f32; 2]>>]| {
+        let refs: Vec<Option<&[[f32; 2]]>> = corners.iter().map(|c| c.as_deref()).collect();
+        let (coords, triangles, _) = write_back(uv, faces, &refs);
+        UvLayer { coords, triangles }
+    };
+    // Each round moves a part of every shared island, so a round per part is enough.
+    for _ in 0..faces.len() {
+        let layer = layer_of(corners);
+        let (chart, count) = crate::uvstats::uv_charts(mesh, &layer);
+        let mut owner = vec![usize::MAX; count];
+        let mut moving = vec![false; faces.len()];
+        for (p, part) in faces.iter().enumerate() {
+            for &f in part {
+                let o = &mut owner[chart[f as usize] as usize];
+                if *o == usize::MAX {
+                    *o = p;
+                } else if *o != p {
+                    let q = if corners[p].is_some() { p } else { *o };
+                    moving[q] = true;
+                }
+            }
+        }
+        let mut moved = false;
+        for (c, _) in corners.iter_mut().zip(&moving).filter(|(_, m)| **m) {
+            let Some(c) = c.as_mut() else { continue };
+            let extent = |k: usize| {
+                let (lo, hi) = c
+                    .iter()
+                    .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), q| (lo.min(q[k]), hi.max(q[k])));
+                hi - lo
+            };
+            let shift = extent(0) + extent(1);
+            if shift > 0.0 && shift.is_finite() {
+                c.iter_mut().for_each(|q| q[0] += shift);
+                moved = true;
+            }
+        }
+        if !moved {
+            return layer;
+        }
+    }
+    layer_of(corners)
 }
 
 /// `island` of every island, in the islands' order, computed in parallel with the islands taken
@@ -4439,5 +4501,26 @@ mod tests {
         assert_eq!((r.islands_after, r.not_injective_after, r.split), (1, 0, 0), "{r:?}");
         let a = analyse_uv(&out.mesh, None, 1024).unwrap().stats;
         assert_eq!((a.flipped_faces, a.overlapping_faces), (0, 0), "{a:?}");
+    }
+
+    /// Two back-to-back pairs of faces on one edge, the pairs folded onto each other: what a
+    /// marching-cubes mesh makes where a wall pinches to an edge (the unruly vase's density grid
+    /// has two: faces 260187/260188 and 260652/260653 of its atlas). Every face becomes a part
+    /// of its own, and the parts lie on top of each other at the origin; two of them are the
+    /// same triangle from the same two mesh vertices, so their UVs along the shared edge were
+    /// equal at both ends and the next step read them as one island of two faces folded onto
+    /// each other (4 overlapping faces after packing). Each part must come out its own island.
+    #[test]
+    fn congruent_parts_on_a_shared_edge_come_out_as_separate_islands() {
+        let positions = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.5, 0.7, -0.3], [0.5, 0.7, 0.3]];
+        let triangles = vec![[2, 0, 1], [1, 0, 2], [1, 0, 3], [3, 0, 1]];
+        // One UV per vertex, the two apexes on one point: one island folded onto itself.
+        let coords = vec![[0.0, 0.0], [1.0, 0.0], [0.5, 0.7], [0.5, 0.7]];
+        let mesh =
+            TriMesh { positions, uv: Some(UvLayer { coords, triangles: triangles.clone() }), triangles };
+        let out = make_injective(&mesh, &InjectiveOptions::default()).unwrap();
+        let (_, charts) = crate::uvstats::uv_charts(&out.mesh, out.mesh.uv.as_ref().unwrap());
+        assert_eq!(charts, out.report.islands_after, "{:?}", out.report);
+        assert_eq!(flips_and_overlaps(&out.mesh), (0, 0));
     }
 }
