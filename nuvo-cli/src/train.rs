@@ -240,13 +240,14 @@ fn print_report(report: &OutputReport, seconds: f64) {
         };
         println!(
             "       UV charts {}, utilisation {:.3}, flipped {} faces ({} on creases of the mesh{untangled}), \
-             overlapping {} faces, faces per chart {:?} ({} moved by the round-trip check, {} from chart \
-             specks to the chart round them)",
+             overlapping {} faces (at {}²), faces per chart {:?} ({} moved by the round-trip check, {} \
+             from chart specks to the chart round them)",
             u.charts,
             u.utilisation,
             b.flipped_faces,
             b.flipped_on_creases,
             b.overlapping_faces,
+            b.raster_resolution,
             b.faces_per_chart,
             b.reassigned_faces,
             b.absorbed_faces

@@ -113,6 +113,9 @@ fn bake_redoes_the_outputs_from_a_run_folder() {
     assert_eq!(plain["bake"]["reassigned_faces"], 0, "the round-trip check is off by default");
     assert_eq!(plain["bake"]["untangle_moves"], 0, "untangling is off by default");
     assert_eq!(plain["bake"]["flipped_before_untangle"], plain["bake"]["flipped_faces"]);
+    // The bake counts at the atlas's resolution (the tiny config's 256), the metrics at 1024.
+    assert_eq!(plain["bake"]["raster_resolution"], 256);
+    assert_eq!(plain["metrics"]["uv"]["raster_resolution"], 1024);
     // `--set` edits the stored config for this bake; a typo is named.
     let checked = dir.path().join("checked");
     let set = [

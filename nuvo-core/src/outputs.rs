@@ -130,6 +130,11 @@ pub struct BakeSummary {
     pub flipped_on_creases: usize,
     pub overlapping_faces: usize,
     pub degenerate_uv_faces: usize,
+    /// The side, in texels, of the raster on which the flips and overlaps above were counted:
+    /// the atlas's own (`output.resolution`), so a user reads them at the texture's resolution;
+    /// `metrics.uv` counts the same atlas at a fixed 1024², as `nuvo eval` counts every tool's,
+    /// so the two can differ where islands come within a texel of each other.
+    pub raster_resolution: u32,
     pub split_vertices: usize,
     pub corners_outside_chart: usize,
     pub mixed_faces: usize,
@@ -605,13 +610,20 @@ fn summarize(r: &BakeReport, recount: Option<&UvAnalysis>, face_chart: &[u32], n
     for &c in face_chart {
         faces_per_chart[c as usize] += 1;
     }
-    let (flipped, on_creases, overlapping, degenerate) = match recount {
-        Some(a) => (a.flipped.len(), a.stats.flipped_on_creases, a.overlapping.len(), a.degenerate_uv.len()),
+    let (flipped, on_creases, overlapping, degenerate, resolution) = match recount {
+        Some(a) => (
+            a.flipped.len(),
+            a.stats.flipped_on_creases,
+            a.overlapping.len(),
+            a.degenerate_uv.len(),
+            a.stats.raster_resolution,
+        ),
         None => (
             r.flipped_faces.len(),
             r.stats.flipped_on_creases,
             r.overlapping_faces.len(),
             r.degenerate_uv_faces.len(),
+            r.stats.raster_resolution,
         ),
     };
     BakeSummary {
@@ -620,6 +632,7 @@ fn summarize(r: &BakeReport, recount: Option<&UvAnalysis>, face_chart: &[u32], n
         flipped_on_creases: on_creases,
         overlapping_faces: overlapping,
         degenerate_uv_faces: degenerate,
+        raster_resolution: resolution,
         split_vertices: r.split_vertices,
         corners_outside_chart: r.corners_outside_chart,
         mixed_faces: r.mixed_faces,
