@@ -94,7 +94,8 @@ use nuvo_geometry::{TriMesh, UvLayer};
 use crate::error::AtlasError;
 use crate::geom::to_dvec3;
 use crate::uvstats::{
-    DEGENERATE_AREA_REL, MeshEdges, degenerate_3d_faces, face_uv_area2, require_uv, uv_charts,
+    DEGENERATE_AREA_REL, MeshEdges, degenerate_3d_area, face_area_3d, face_uv_area2, is_degenerate_3d,
+    require_uv, uv_charts,
 };
 
 mod shapes;
@@ -365,19 +366,18 @@ impl Layout {
         let mut area_uv = vec![0.0f64; n];
         let mut area_3d = vec![0.0f64; n];
         let mut metrics: Vec<Vec<[f64; 3]>> = vec![Vec::new(); n];
-        let degenerate_3d = degenerate_3d_faces(mesh);
+        let degenerate_area = degenerate_3d_area(mesh);
         // Each face's areas and metric computed in parallel, summed into its island in face
         // order below: the same sums as one loop, and the necks pass prepares a layout per trial
         // (this loop alone was a fifth of the horse's pass).
         let per_face: Vec<(f64, f64, Option<[f64; 3]>)> = (0..uv.triangles.len())
             .into_par_iter()
             .map(|f| {
-                let [a, b, c] = mesh.corners(f).map(to_dvec3);
                 let t = uv.triangles[f].map(|j| uv.coords[j as usize]);
                 (
                     face_uv_area2(uv, f).abs() * 0.5,
-                    0.5 * (b - a).cross(c - a).length(),
-                    face_metric([a, b, c], t),
+                    face_area_3d(mesh, f),
+                    face_metric(mesh.corners(f).map(to_dvec3), t),
                 )
             })
             .collect();
@@ -389,7 +389,7 @@ impl Layout {
                 let i = island_of_face[f];
                 let (face_area_uv, face_area_3d, metric) = per_face[f];
                 // A face without 3-D area has no texel density to match (module docs).
-                if !degenerate_3d[f] {
+                if !is_degenerate_3d(face_area_3d, degenerate_area) {
                     area_uv[i as usize] += face_area_uv;
                 }
                 area_3d[i as usize] += face_area_3d;

@@ -179,13 +179,7 @@ impl AtlasSquare {
 
 /// The 3-D area of every face, in f64.
 pub(crate) fn face_areas_3d(mesh: &TriMesh) -> Vec<f64> {
-    (0..mesh.triangles.len())
-        .into_par_iter()
-        .map(|f| {
-            let [a, b, c] = mesh.corners(f).map(to_dvec3);
-            0.5 * (b - a).cross(c - a).length()
-        })
-        .collect()
+    (0..mesh.triangles.len()).into_par_iter().map(|f| crate::uvstats::face_area_3d(mesh, f)).collect()
 }
 
 /// The (unsigned) UV area of every face in atlas-square units: the share of the square it covers.

@@ -362,16 +362,26 @@ pub(crate) fn faces_by_edge(faces: impl Iterator<Item = (u32, [u32; 3])>) -> Has
 
 /// Whether each face is degenerate in 3-D ([`DEGENERATE_AREA_REL`]).
 pub(crate) fn degenerate_3d_faces(mesh: &TriMesh) -> Vec<bool> {
-    let diag2 = mesh.bounds().map_or(0.0, |b| (to_dvec3(b.max) - to_dvec3(b.min)).length_squared());
-    let eps = DEGENERATE_AREA_REL * diag2;
-    (0..mesh.triangles.len())
-        .into_par_iter()
-        .map(|f| {
-            let [a, b, c] = mesh.corners(f).map(to_dvec3);
-            let area = 0.5 * (b - a).cross(c - a).length();
-            area.is_nan() || area <= eps
-        })
-        .collect()
+    let eps = degenerate_3d_area(mesh);
+    (0..mesh.triangles.len()).into_par_iter().map(|f| is_degenerate_3d(face_area_3d(mesh, f), eps)).collect()
+}
+
+/// The 3-D area at or below which a face of `mesh` is degenerate: [`DEGENERATE_AREA_REL`] times
+/// the squared diagonal of its bounding box.
+pub(crate) fn degenerate_3d_area(mesh: &TriMesh) -> f64 {
+    DEGENERATE_AREA_REL * mesh.bounds().map_or(0.0, |b| (to_dvec3(b.max) - to_dvec3(b.min)).length_squared())
+}
+
+/// Whether a face of 3-D area `area` ([`face_area_3d`]) is degenerate, `eps` from
+/// [`degenerate_3d_area`] (a NaN area is).
+pub(crate) fn is_degenerate_3d(area: f64, eps: f64) -> bool {
+    area.is_nan() || area <= eps
+}
+
+/// The 3-D area of face `f` of `mesh`, in `f64`.
+pub(crate) fn face_area_3d(mesh: &TriMesh, f: usize) -> f64 {
+    let [a, b, c] = mesh.corners(f).map(to_dvec3);
+    0.5 * (b - a).cross(c - a).length()
 }
 
 /// Faces whose orientation disagrees with their chart's area-weighted majority (module docs).
