@@ -6,6 +6,7 @@
 //! term responsible; the run loop ([`crate::run`]) rolls back after too many skipped steps.
 
 use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use nuvo_autodiff::optim::{Adam, AdamConfig, CosineSchedule};
 use nuvo_autodiff::{ParamStore, Shape, Tape, Var};
@@ -306,8 +307,21 @@ impl Trainer {
     /// The step runs on a rayon worker thread: the engine's parallel kernels then fork and join
     /// inside the pool instead of each handing its work over from the calling thread and sleeping
     /// until it is done (a futex round trip per kernel, measured at several percent of a small step).
+    /// While it runs, the pool's other threads stay awake on its jobs ([`keep_busy`]).
     pub fn step(&mut self) -> Result<StepOutcome, TrainError> {
-        rayon::scope(|_| self.step_on_worker())
+        let done = AtomicBool::new(false);
+        rayon::scope(|scope| {
+            let _stepping = Stepping::enter();
+            if STEPPING.load(Ordering::SeqCst) == 1 {
+                let (done, stepper) = (&done, rayon::current_thread_index());
+                for _ in 1..rayon::current_num_threads() {
+                    scope.spawn(move |_| keep_busy(done, stepper));
+                }
+            }
+            let outcome = self.step_on_worker();
+            done.store(true, Ordering::Release);
+            outcome
+        })
     }
 
     fn step_on_worker(&mut self) -> Result<StepOutcome, TrainError> {
@@ -616,6 +630,53 @@ fn build_terms(
         }
     }
     Ok(terms)
+}
+
+/// Steps running in this process now (tests, or a library user, may step several trainers on one
+/// pool at once).
+static STEPPING: AtomicUsize = AtomicUsize::new(0);
+
+/// One step counted in [`STEPPING`] while it lives (also when the step fails or panics).
+struct Stepping;
+
+impl Stepping {
+    fn enter() -> Stepping {
+        STEPPING.fetch_add(1, Ordering::SeqCst);
+        Stepping
+    }
+}
+
+impl Drop for Stepping {
+    fn drop(&mut self) {
+        STEPPING.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
+/// Run on the pool's other threads while a step runs alone (spawned by [`Trainer::step`] before
+/// any of the step's own jobs): runs the pool's jobs as they come and spins between them instead
+/// of going to sleep, until the step is `done` or another step starts.
+///
+/// Why: a step is a few hundred parallel kernels of 0.1–1 ms, with the step's sequential work in
+/// between; an idle rayon thread falls asleep within tens of microseconds, and waking it again
+/// for the next kernel costs more than that (on the 2-core VMs of BENCHMARKS.md, "A second thread
+/// kept awake through the step"). Kept awake, steps of the README job's training ran 2–6%
+/// faster, each step A/B against the next in the same runs, with the same bits. The thread burns
+/// its core while it waits, as OpenMP's active wait policy does; between steps it sleeps.
+///
+/// Safe from deadlock because such a job blocks its thread only on the step's own progress: it is
+/// spawned before the step pushes any job, so a thread that steals it (oldest first) holds none of
+/// the step's jobs beneath it, and on the step's own thread it returns at once; and because with
+/// a second step running (two trainers sharing the pool, each thread could end up spinning for the
+/// other's step above that step's frames) it returns too.
+fn keep_busy(done: &AtomicBool, stepper: Option<usize>) {
+    if rayon::current_thread_index() == stepper {
+        return;
+    }
+    while !done.load(Ordering::Acquire) && STEPPING.load(Ordering::SeqCst) == 1 {
+        if rayon::yield_now() != Some(rayon::Yield::Executed) {
+            std::hint::spin_loop();
+        }
+    }
 }
 
 #[cfg(test)]

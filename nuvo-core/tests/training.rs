@@ -481,6 +481,45 @@ fn pruned_steps_do_not_depend_on_the_thread_count() {
         param_values(&t)
     };
     assert!(params_with(1) == params_with(2), "1 and 2 threads differ");
+    assert!(params_with(1) == params_with(3), "1 and 3 threads differ");
+}
+
+#[test]
+fn trainers_stepping_at_once_on_one_pool_finish_with_their_own_bits() {
+    // A step keeps the pool's other threads awake on its jobs while it runs alone (`keep_busy`);
+    // two trainers stepping on one pool at once (as tests do on rayon's global pool) must neither
+    // wait for each other forever nor change each other's results.
+    let cfg = |seed: u64| {
+        let mut cfg = small("[warm_start]\nsteps = 3\n");
+        cfg.config.seed = seed;
+        cfg.config.model.width = 64;
+        cfg.config.training.batch_3d = 700;
+        cfg
+    };
+    let steps = 10;
+    let alone: Vec<Vec<f32>> = [1, 2]
+        .map(|seed| {
+            let mut t = trainer(&cfg(seed));
+            (0..steps).for_each(|_| drop(t.step().unwrap()));
+            param_values(&t)
+        })
+        .into();
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+    let together: Vec<Vec<f32>> = std::thread::scope(|threads| {
+        let runs: Vec<_> = [1, 2]
+            .map(|seed| {
+                let (pool, cfg) = (&pool, cfg(seed));
+                threads.spawn(move || {
+                    let mut t = trainer(&cfg);
+                    pool.install(|| (0..steps).for_each(|_| drop(t.step().unwrap())));
+                    param_values(&t)
+                })
+            })
+            .into();
+        runs.into_iter().map(|r| r.join().unwrap()).collect()
+    });
+    assert!(alone[0] != alone[1], "the seeds train differently");
+    assert!(together == alone, "stepping at once changed a trainer's bits");
 }
 
 #[test]
