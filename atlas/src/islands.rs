@@ -387,12 +387,12 @@ impl Layout {
             .enumerate()
             .map(|(f, t)| {
                 let i = island_of_face[f];
-                let (face_area_uv, face_area_3d, metric) = per_face[f];
+                let (face_uv, face_3d, metric) = per_face[f];
                 // A face without 3-D area has no texel density to match (module docs).
-                if !is_degenerate_3d(face_area_3d, degenerate_area) {
-                    area_uv[i as usize] += face_area_uv;
+                if !is_degenerate_3d(face_3d, degenerate_area) {
+                    area_uv[i as usize] += face_uv;
                 }
-                area_3d[i as usize] += face_area_3d;
+                area_3d[i as usize] += face_3d;
                 if let Some(g) = metric {
                     metrics[i as usize].push(g);
                 }
