@@ -178,6 +178,23 @@ pub(crate) enum Sampling {
     Exact,
 }
 
+impl Sampling {
+    /// Calls `visit(x, y, l)` for every pixel centre of columns `0..width` and rows `rows` that
+    /// the triangle `v` covers, sampled this way.
+    pub(crate) fn rasterize(
+        self,
+        v: Tri2,
+        width: u32,
+        rows: Range<u32>,
+        visit: impl FnMut(u32, u32, [f32; 3]),
+    ) {
+        match self {
+            Sampling::Snapped => rasterize_triangle(v, width, rows, visit),
+            Sampling::Exact => rasterize_triangle_exact(v, width, rows, visit),
+        }
+    }
+}
+
 /// Rasterises triangles `0..count` into `pixels` (`width × height`, row-major), calling
 /// `shade(pixel, triangle, barycentrics)` for every covered pixel. `vertices(i)` gives triangle
 /// `i` in pixel space, or `None` to skip it. Parallel over bands of rows, deterministic (module docs).
@@ -217,12 +234,9 @@ pub(crate) fn raster_parallel<P: Send>(
         for &i in bins.iter().flat_map(|chunk| &chunk[b]) {
             let i = i as usize;
             if let Some(v) = vertices(i) {
-                let visit =
-                    |x: u32, y: u32, l: [f32; 3]| shade(&mut band[(y as usize - y0) * w + x as usize], i, l);
-                match sampling {
-                    Sampling::Snapped => rasterize_triangle(v, width, rows.clone(), visit),
-                    Sampling::Exact => rasterize_triangle_exact(v, width, rows.clone(), visit),
-                }
+                sampling.rasterize(v, width, rows.clone(), |x, y, l| {
+                    shade(&mut band[(y as usize - y0) * w + x as usize], i, l)
+                });
             }
         }
     });
@@ -267,11 +281,7 @@ mod tests {
     fn sampled_coverage(sampling: Sampling, tris: &[Tri2], w: u32, h: u32) -> Vec<u32> {
         let mut count = vec![0u32; (w * h) as usize];
         for &t in tris {
-            let visit = |x: u32, y: u32, _| count[(y * w + x) as usize] += 1;
-            match sampling {
-                Sampling::Snapped => rasterize_triangle(t, w, 0..h, visit),
-                Sampling::Exact => rasterize_triangle_exact(t, w, 0..h, visit),
-            }
+            sampling.rasterize(t, w, 0..h, |x, y, _| count[(y * w + x) as usize] += 1);
         }
         count
     }
@@ -357,16 +367,12 @@ mod tests {
             );
             let mut serial = vec![u32::MAX; (w * h) as usize];
             for (i, &t) in tris.iter().enumerate() {
-                let visit = |x: u32, y: u32, _| {
+                sampling.rasterize(t, w, 0..h, |x, y, _| {
                     let p = &mut serial[(y * w + x) as usize];
                     if *p == u32::MAX {
                         *p = i as u32
                     }
-                };
-                match sampling {
-                    Sampling::Snapped => rasterize_triangle(t, w, 0..h, visit),
-                    Sampling::Exact => rasterize_triangle_exact(t, w, 0..h, visit),
-                }
+                });
             }
             assert_eq!(first, serial, "{sampling:?}");
         }
