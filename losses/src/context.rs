@@ -14,10 +14,51 @@
 //! samples belong to one or two of them, so this skips most of the per-chart passes over the 3-D
 //! samples while changing each loss by less than `τ` times its size. With `τ = 0` the support is
 //! every sample, and a term is exactly what [`Samples::All`] gives.
+//!
+//! **Evaluations stacked.** One network's evaluations of one step on inputs that do not depend on
+//! each other are recorded as one evaluation of the inputs stacked (`concat_rows`) and sliced back:
+//! chart `i`'s texture network on its rows (its support, or every sample) together with the
+//! distortion samples' offsets `x + εp` and `x + εq`, and its surface network on `t_i` of its rows
+//! together with the UV samples `u`. With the paper's losses a step then runs each texture network
+//! twice (the second time on `s_i(u)`, which depends on the first) and each surface network once,
+//! instead of four times and twice: fewer and larger GEMMs for the two cores to share (BENCHMARKS.md,
+//! "One evaluation per network and input layer"). Each row is the same function of the same input
+//! either way; only the rounding of the weight gradients' sums over rows differs. What is stacked
+//! follows from the [`Reads`] the step's losses declare and the order they ask in, both fixed by the
+//! config and the step, so a step's tape stays a function of them (determinism, resume). A quantity
+//! asked for but not declared is evaluated on its own as it is asked for.
 
 use nuvo_autodiff::{Shape, Tape, Var};
 
 use crate::networks::Networks;
+
+/// What a step's losses read of the context ([`crate::Loss::reads`]), so that the context can stack
+/// one network's evaluations (module docs, "Evaluations stacked"). Declaring less than a loss reads
+/// costs speed, never correctness; declaring more records evaluations nothing reads.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Reads {
+    /// The UV differentials ([`StepContext::uv_differentials`]).
+    pub uv_differentials: bool,
+    /// The 3→2→3 round trip `s_i(t_i(x))` ([`StepContext::cycle_points`]).
+    pub cycle_points: bool,
+    /// The surface points `s_i(u)` ([`StepContext::surface_points`] and what is built on them:
+    /// `all_surface_points`, `cycle_uv`, `chart_log_probs_at_surface_points`).
+    pub surface_points: bool,
+}
+
+impl Reads {
+    /// Nothing declared: every quantity is evaluated on its own, as it is asked for.
+    pub const NOTHING: Reads = Reads { uv_differentials: false, cycle_points: false, surface_points: false };
+
+    /// What either reads.
+    pub fn union(self, other: Reads) -> Reads {
+        Reads {
+            uv_differentials: self.uv_differentials || other.uv_differentials,
+            cycle_points: self.cycle_points || other.cycle_points,
+            surface_points: self.surface_points || other.surface_points,
+        }
+    }
+}
 
 /// The raw data of one step. Invariant: `points` and `normals` have the same length `B`;
 /// `tangents_p` and `tangents_q` have the same length `k ≤ B` and `(tangents_p[j], tangents_q[j],
@@ -60,7 +101,6 @@ struct Cache {
     chart_logits: Option<Var>,
     chart_probs: Option<Var>,
     tex: Vec<Option<Var>>,
-    tex_offsets: Vec<Option<(Var, Var)>>,
     differentials: Vec<Option<(Var, Var)>>,
     cycle_points: Vec<Option<Var>>,
     surface_points: Vec<Option<Var>>,
@@ -126,6 +166,9 @@ pub struct StepContext<'a> {
     pub tape: &'a mut Tape,
     nets: &'a dyn Networks,
     data: StepData<'a>,
+    reads: Reads,
+    /// Whether evaluations are stacked at all (always, but in tests that compare with separate ones).
+    stack: bool,
     cache: Cache,
 }
 
@@ -148,6 +191,14 @@ macro_rules! cached {
     }};
 }
 
+/// The UV differentials `(t(x + εp) − t(x), t(x + εq) − t(x))` from `t` on rows whose first ones are
+/// the distortion rows of `tp` and `tq`.
+fn differences(tape: &mut Tape, t: Var, tp: Var, tq: Var) -> (Var, Var) {
+    let k = tape.shape(tp).rows;
+    let t = if tape.shape(t).rows == k { t } else { tape.slice_rows(t, 0, k) };
+    (tape.sub(tp, t), tape.sub(tq, t))
+}
+
 fn rows3(tape: &mut Tape, rows: &[[f32; 3]]) -> Var {
     tape.input_with(Shape::new(rows.len(), 3), |d| d.copy_from_slice(rows.as_flattened()))
 }
@@ -158,7 +209,6 @@ impl<'a> StepContext<'a> {
         let n = nets.charts();
         let cache = Cache {
             tex: vec![None; n],
-            tex_offsets: vec![None; n],
             differentials: vec![None; n],
             cycle_points: vec![None; n],
             surface_points: vec![None; n],
@@ -170,7 +220,37 @@ impl<'a> StepContext<'a> {
             support_cycle_points: vec![None; n],
             ..Cache::default()
         };
-        StepContext { tape, nets, data, cache }
+        StepContext { tape, nets, data, reads: Reads::NOTHING, stack: true, cache }
+    }
+
+    /// This context, told what the step's losses will read, so that it stacks evaluations (module
+    /// docs).
+    pub fn reading(self, reads: Reads) -> Self {
+        StepContext { reads, ..self }
+    }
+
+    /// This context, evaluating every input on its own: the reference the stacked evaluations are
+    /// tested against.
+    #[cfg(test)]
+    pub(crate) fn never_stacking(self) -> Self {
+        StepContext { stack: false, ..self }
+    }
+
+    /// `f` of each of `inputs` (same column count), recorded as one evaluation of them stacked and
+    /// sliced back into their own rows (module docs, "Evaluations stacked").
+    fn stacked<const N: usize>(&mut self, inputs: [Var; N], f: impl Fn(&mut Tape, Var) -> Var) -> [Var; N] {
+        if !self.stack {
+            return inputs.map(|x| f(self.tape, x));
+        }
+        let all = self.tape.concat_rows(&inputs);
+        let out = f(self.tape, all);
+        let mut start = 0;
+        inputs.map(|x| {
+            let rows = self.tape.shape(x).rows;
+            let part = self.tape.slice_rows(out, start, rows);
+            start += rows;
+            part
+        })
     }
 
     /// Number of charts.
@@ -236,10 +316,67 @@ impl<'a> StepContext<'a> {
 
     /// `t_i(x)` on every sample.
     fn tex_everywhere(&mut self, i: usize) -> Var {
-        cached!(self.tex[i], {
+        if let Some(t) = self.cache.tex[i] {
+            return t;
+        }
+        if self.support(i).is_none() {
+            self.texture_pass(i, false, self.reads.uv_differentials);
+        } else {
             let x = self.x();
-            self.nets.texture(self.tape, i, x)
-        })
+            self.cache.tex[i] = Some(self.nets.texture(self.tape, i, x));
+        }
+        self.cache.tex[i].expect("recorded above")
+    }
+
+    /// Records `t_i` on chart `i`'s rows (its support when `pruned`, else every sample) and, when
+    /// `offsets`, the UV differentials on its distortion rows, as one evaluation of the texture
+    /// network (module docs), into the caches of those rows.
+    fn texture_pass(&mut self, i: usize, pruned: bool, offsets: bool) {
+        let x = self.x();
+        let x = if pruned { self.select(ChartRows::new(i, Samples::Support), x) } else { x };
+        let nets = self.nets;
+        if !offsets {
+            let t = nets.texture(self.tape, i, x);
+            *self.tex_cache(i, pruned) = Some(t);
+            return;
+        }
+        let (xp, xq) = self.distortion_offsets(i, pruned);
+        let [t, tp, tq] = self.stacked([x, xp, xq], |tape, x| nets.texture(tape, i, x));
+        *self.tex_cache(i, pruned) = Some(t);
+        let d = differences(self.tape, t, tp, tq);
+        *self.differentials_cache(i, pruned) = Some(d);
+    }
+
+    /// The UV differentials of chart `i`'s distortion rows from `t`, its `t_i` on its rows already
+    /// recorded: the two offsets stacked in one evaluation.
+    fn differentials_from(&mut self, i: usize, pruned: bool, t: Var) -> (Var, Var) {
+        let (xp, xq) = self.distortion_offsets(i, pruned);
+        let nets = self.nets;
+        let [tp, tq] = self.stacked([xp, xq], |tape, x| nets.texture(tape, i, x));
+        differences(self.tape, t, tp, tq)
+    }
+
+    /// The offsets `(x + εp, x + εq)` of chart `i`'s distortion rows: those of its support when
+    /// `pruned`, else every distortion sample's.
+    fn distortion_offsets(&mut self, i: usize, pruned: bool) -> (Var, Var) {
+        let (xp, xq) = self.offsets();
+        if !pruned {
+            return (xp, xq);
+        }
+        let rows = ChartRows::new(i, Samples::DistortionSupport);
+        (self.select(rows, xp), self.select(rows, xq))
+    }
+
+    fn tex_cache(&mut self, i: usize, pruned: bool) -> &mut Option<Var> {
+        if pruned { &mut self.cache.support_tex[i] } else { &mut self.cache.tex[i] }
+    }
+
+    fn differentials_cache(&mut self, i: usize, pruned: bool) -> &mut Option<(Var, Var)> {
+        if pruned { &mut self.cache.support_differentials[i] } else { &mut self.cache.differentials[i] }
+    }
+
+    fn cycle_points_cache(&mut self, i: usize, pruned: bool) -> &mut Option<Var> {
+        if pruned { &mut self.cache.support_cycle_points[i] } else { &mut self.cache.cycle_points[i] }
     }
 
     /// The offset points `(x + εp, x + εq)` of the distortion samples (constants, `k×3`).
@@ -255,14 +392,6 @@ impl<'a> StepContext<'a> {
             };
             let (p, q) = (shifted(d.tangents_p), shifted(d.tangents_q));
             (rows3(self.tape, &p), rows3(self.tape, &q))
-        })
-    }
-
-    /// `(t_i(x + εp), t_i(x + εq))` for every distortion sample.
-    fn tex_at_offsets(&mut self, i: usize) -> (Var, Var) {
-        cached!(self.tex_offsets[i], {
-            let (xp, xq) = self.offsets();
-            (self.nets.texture(self.tape, i, xp), self.nets.texture(self.tape, i, xq))
         })
     }
 
@@ -288,13 +417,16 @@ impl<'a> StepContext<'a> {
 
     /// [`Self::uv_differentials`] on every distortion sample.
     fn uv_differentials_everywhere(&mut self, i: usize) -> (Var, Var) {
-        cached!(self.differentials[i], {
-            let k = self.batch_distortion();
+        if let Some(d) = self.cache.differentials[i] {
+            return d;
+        }
+        if self.cache.tex[i].is_none() && self.support(i).is_none() {
+            self.texture_pass(i, false, true);
+        } else {
             let t = self.tex_everywhere(i);
-            let t = if k < self.batch_3d() { self.tape.slice_rows(t, 0, k) } else { t };
-            let (tp, tq) = self.tex_at_offsets(i);
-            (self.tape.sub(tp, t), self.tape.sub(tq, t))
-        })
+            self.cache.differentials[i] = Some(self.differentials_from(i, false, t));
+        }
+        self.cache.differentials[i].expect("recorded above")
     }
 
     /// `s_i(t_i(x))`, the 3→2→3 round trip, on the rows `r` names (`rows×3`).
@@ -309,10 +441,33 @@ impl<'a> StepContext<'a> {
 
     /// `s_i(t_i(x))` on every sample.
     fn cycle_points_everywhere(&mut self, i: usize) -> Var {
-        cached!(self.cycle_points[i], {
+        if let Some(s) = self.cache.cycle_points[i] {
+            return s;
+        }
+        if self.support(i).is_none() {
+            let with_uv = self.reads.surface_points && self.cache.surface_points[i].is_none();
+            self.surface_pass(i, false, with_uv);
+        } else {
             let t = self.tex_everywhere(i);
-            self.nets.surface(self.tape, i, t)
-        })
+            self.cache.cycle_points[i] = Some(self.nets.surface(self.tape, i, t));
+        }
+        self.cache.cycle_points[i].expect("recorded above")
+    }
+
+    /// Records `s_i(t_i(x))` on chart `i`'s rows (its support when `pruned`, else every sample)
+    /// and, when `with_uv`, `s_i(u)`, as one evaluation of the surface network (module docs).
+    fn surface_pass(&mut self, i: usize, pruned: bool, with_uv: bool) {
+        let t = if pruned { self.support_tex(i) } else { self.tex_everywhere(i) };
+        let nets = self.nets;
+        if !with_uv {
+            let s = nets.surface(self.tape, i, t);
+            *self.cycle_points_cache(i, pruned) = Some(s);
+            return;
+        }
+        let u = self.uv();
+        let [back, s] = self.stacked([t, u], |tape, x| nets.surface(tape, i, x));
+        *self.cycle_points_cache(i, pruned) = Some(back);
+        self.cache.surface_points[i] = Some(s);
     }
 
     /// `v`, a quantity of the rows of `r`'s chart on all its samples or on its support, cut to its
@@ -327,10 +482,17 @@ impl<'a> StepContext<'a> {
 
     /// `s_i(u)` (`|T|×3`).
     pub fn surface_points(&mut self, i: usize) -> Var {
-        cached!(self.surface_points[i], {
+        if let Some(s) = self.cache.surface_points[i] {
+            return s;
+        }
+        let pruned = self.support(i).is_some();
+        if self.reads.cycle_points && self.cycle_points_cache(i, pruned).is_none() {
+            self.surface_pass(i, pruned, true);
+        } else {
             let u = self.uv();
-            self.nets.surface(self.tape, i, u)
-        })
+            self.cache.surface_points[i] = Some(self.nets.surface(self.tape, i, u));
+        }
+        self.cache.surface_points[i].expect("recorded above")
     }
 
     /// `⋃_i s_i(T)`: every chart's surface points stacked, chart 0 first (`n|T|×3`).
@@ -437,11 +599,10 @@ impl<'a> StepContext<'a> {
         if self.support(i).is_none() {
             return self.tex_everywhere(i);
         }
-        cached!(self.support_tex[i], {
-            let x = self.x();
-            let x = self.select(ChartRows::new(i, Samples::Support), x);
-            self.nets.texture(self.tape, i, x)
-        })
+        if self.cache.support_tex[i].is_none() {
+            self.texture_pass(i, true, self.reads.uv_differentials);
+        }
+        self.cache.support_tex[i].expect("recorded above")
     }
 
     /// The UV differentials on the distortion samples of chart `i`'s support.
@@ -449,16 +610,14 @@ impl<'a> StepContext<'a> {
         if self.support(i).is_none() {
             return self.uv_differentials_everywhere(i);
         }
-        cached!(self.support_differentials[i], {
-            let t = self.support_tex(i);
-            let (xp, xq) = self.offsets();
-            let rows = ChartRows::new(i, Samples::DistortionSupport);
-            let xp = self.select(rows, xp);
-            let xq = self.select(rows, xq);
-            let t = self.tape.slice_rows(t, 0, self.tape.shape(xp).rows);
-            let (tp, tq) = (self.nets.texture(self.tape, i, xp), self.nets.texture(self.tape, i, xq));
-            (self.tape.sub(tp, t), self.tape.sub(tq, t))
-        })
+        if let Some(d) = self.cache.support_differentials[i] {
+            return d;
+        }
+        match self.cache.support_tex[i] {
+            None => self.texture_pass(i, true, true),
+            Some(t) => self.cache.support_differentials[i] = Some(self.differentials_from(i, true, t)),
+        }
+        self.cache.support_differentials[i].expect("recorded above")
     }
 
     /// `s_i(t_i(x))` on chart `i`'s support.
@@ -466,10 +625,11 @@ impl<'a> StepContext<'a> {
         if self.support(i).is_none() {
             return self.cycle_points_everywhere(i);
         }
-        cached!(self.support_cycle_points[i], {
-            let t = self.support_tex(i);
-            self.nets.surface(self.tape, i, t)
-        })
+        if self.cache.support_cycle_points[i].is_none() {
+            let with_uv = self.reads.surface_points && self.cache.surface_points[i].is_none();
+            self.surface_pass(i, true, with_uv);
+        }
+        self.cache.support_cycle_points[i].expect("recorded above")
     }
 
     /// The learned average stretch `σ`.
@@ -480,5 +640,93 @@ impl<'a> StepContext<'a> {
     /// The normal grid `N_i` and its resolution.
     pub fn normal_grid(&mut self, i: usize) -> (Var, usize) {
         cached!(self.grids[i], self.nets.normal_grid(self.tape, i))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Reads;
+    use crate::Loss;
+    use crate::builtin::PAPER;
+    use crate::registry::LossRegistry;
+    use crate::testing::{Evaluations, Scene};
+
+    /// The paper's eight losses with their default options, plus the signed stretch (which tells
+    /// `εp` from `εq`), and what they declare they read.
+    fn paper_losses() -> (Vec<Box<dyn Loss>>, Reads) {
+        let registry = LossRegistry::with_builtins();
+        let mut losses: Vec<Box<dyn Loss>> = PAPER
+            .iter()
+            .map(|name| registry.build(name, &toml::Table::new()).expect("a built-in loss"))
+            .collect();
+        let signed: toml::Table = toml::from_str("signed = true").expect("a table");
+        losses.push(registry.build("stretch", &signed).expect("the signed stretch"));
+        let reads = losses.iter().fold(Reads::NOTHING, |r, l| r.union(l.reads()));
+        (losses, reads)
+    }
+
+    /// The generic scene with every chart everywhere, and with both charts' supports pruned
+    /// (chart 0 keeps samples 0 and 2, chart 1 samples 1, 2 and 3) and three distortion samples.
+    fn scenes() -> [(&'static str, Scene); 2] {
+        let pruned = Scene::generic()
+            .with_chart_logits_along_x(8.0, -3.0)
+            .with_chart_support(0.2)
+            .with_distortion_samples(3);
+        [("every chart everywhere", Scene::generic()), ("pruned supports", pruned)]
+    }
+
+    #[test]
+    fn the_paper_losses_declare_what_they_read() {
+        let (_, reads) = paper_losses();
+        assert_eq!(reads, Reads { uv_differentials: true, cycle_points: true, surface_points: true });
+    }
+
+    #[test]
+    fn stacked_evaluations_give_the_values_and_gradients_of_separate_ones() {
+        let (losses, reads) = paper_losses();
+        let losses: Vec<&dyn Loss> = losses.iter().map(|l| &**l).collect();
+        for (name, scene) in scenes() {
+            let (apart, apart_grads, _) = scene.total_and_gradients(&losses, None);
+            let (stacked, stacked_grads, _) = scene.total_and_gradients(&losses, Some(reads));
+            let close = |a: f32, b: f32| (a - b).abs() <= 1e-5 * a.abs().max(b.abs()).max(1.0);
+            assert!(close(apart, stacked), "{name}: total {apart} apart, {stacked} stacked");
+            for (k, (a, b)) in apart_grads.iter().zip(&stacked_grads).enumerate() {
+                assert!(a.iter().any(|&g| g != 0.0), "{name}: parameter {k} has no gradient to compare");
+                for (&ga, &gb) in a.iter().zip(b) {
+                    assert!(close(ga, gb), "{name}: parameter {k}'s gradient {ga} apart, {gb} stacked");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn with_the_paper_losses_a_step_runs_each_network_once_per_input_layer() {
+        let (losses, reads) = paper_losses();
+        let losses: Vec<&dyn Loss> = losses.iter().map(|l| &**l).collect();
+        for (name, scene) in scenes() {
+            let (_, _, apart) = scene.total_and_gradients(&losses, None);
+            let (_, _, stacked) = scene.total_and_gradients(&losses, Some(reads));
+            // Apart: per chart t_i on its rows, at x + εp, at x + εq and on s_i(u); s_i on t_i and on u.
+            assert_eq!(apart, Evaluations { chart: 2, texture: 2 * 4, surface: 2 * 2 }, "{name}");
+            // Stacked: t_i on its rows and offsets, then on s_i(u); s_i on t_i and u together.
+            assert_eq!(stacked, Evaluations { chart: 2, texture: 2 * 2, surface: 2 }, "{name}");
+        }
+    }
+
+    #[test]
+    fn a_quantity_asked_for_but_not_declared_is_evaluated_on_its_own() {
+        // Nothing declared: a quantity's own inputs are still stacked (the differentials ask for
+        // t_i on the chart's rows and both offsets at once), but s_i(t_i(x)) and s_i(u) are apart.
+        let (losses, _) = paper_losses();
+        let losses: Vec<&dyn Loss> = losses.iter().map(|l| &**l).collect();
+        for (name, scene) in scenes() {
+            let (apart, _, _) = scene.total_and_gradients(&losses, None);
+            let (undeclared, _, counts) = scene.total_and_gradients(&losses, Some(Reads::NOTHING));
+            assert!(
+                (apart - undeclared).abs() <= 1e-5 * apart.abs().max(1.0),
+                "{name}: {apart} against {undeclared}"
+            );
+            assert_eq!(counts, Evaluations { chart: 2, texture: 2 * 2, surface: 2 * 2 }, "{name}");
+        }
     }
 }

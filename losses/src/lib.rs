@@ -28,7 +28,7 @@ pub mod registry;
 #[cfg(test)]
 mod testing;
 
-pub use context::{ChartRows, Samples, StepContext, StepData};
+pub use context::{ChartRows, Reads, Samples, StepContext, StepData};
 pub use loss::{Loss, LossError, chart_weighted_mean, squared_distance};
 pub use networks::Networks;
 pub use registry::{LossInfo, LossRegistry, OptionDoc, RegisteredLoss, no_options, parse_options};

@@ -2,7 +2,7 @@
 
 use nuvo_autodiff::Var;
 
-use crate::context::{ChartRows, Samples, StepContext};
+use crate::context::{ChartRows, Reads, Samples, StepContext};
 
 /// Why a loss could not be built or evaluated.
 #[derive(Debug, thiserror::Error)]
@@ -26,6 +26,13 @@ pub enum LossError {
 pub trait Loss: Send + Sync {
     /// Records the term for this step and returns it.
     fn evaluate(&self, ctx: &mut StepContext<'_>) -> Result<Var, LossError>;
+
+    /// What [`Self::evaluate`] reads of the context, so that the context can stack one network's
+    /// evaluations of a step ([`Reads`]). Nothing by default: every quantity is still there, each
+    /// evaluated on its own.
+    fn reads(&self) -> Reads {
+        Reads::NOTHING
+    }
 }
 
 /// `(1/|G|) Σ_x Σ_i c(x)[i] · d_i(x)`: the chart-probability-weighted batch mean that most of the

@@ -1,10 +1,12 @@
 //! Test support: tiny affine "networks" whose losses can be computed by hand, and a finite-difference
 //! gradient check of any loss with respect to every network parameter.
 
+use std::cell::Cell;
+
 use nuvo_autodiff::gradcheck::{GradCheck, check_gradients};
 use nuvo_autodiff::{Activation, Tape, Tensor, Var};
 
-use crate::context::{StepContext, StepData};
+use crate::context::{Reads, StepContext, StepData};
 use crate::loss::Loss;
 use crate::networks::Networks;
 
@@ -36,6 +38,52 @@ impl Networks for AffineNets {
     }
     fn normal_grid(&self, _tape: &mut Tape, i: usize) -> (Var, usize) {
         (self.grids[i], self.grid_res)
+    }
+}
+
+/// How many times each kind of network ran while a step was recorded.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Evaluations {
+    pub chart: usize,
+    pub texture: usize,
+    pub surface: usize,
+}
+
+/// `nets`, counting their evaluations.
+struct Counted<N> {
+    nets: N,
+    counts: Cell<Evaluations>,
+}
+
+impl<N: Networks> Counted<N> {
+    fn count(&self, f: impl FnOnce(&mut Evaluations)) {
+        let mut c = self.counts.get();
+        f(&mut c);
+        self.counts.set(c);
+    }
+}
+
+impl<N: Networks> Networks for Counted<N> {
+    fn charts(&self) -> usize {
+        self.nets.charts()
+    }
+    fn chart_logits(&self, tape: &mut Tape, x: Var) -> Var {
+        self.count(|c| c.chart += 1);
+        self.nets.chart_logits(tape, x)
+    }
+    fn texture(&self, tape: &mut Tape, i: usize, x: Var) -> Var {
+        self.count(|c| c.texture += 1);
+        self.nets.texture(tape, i, x)
+    }
+    fn surface(&self, tape: &mut Tape, i: usize, uv: Var) -> Var {
+        self.count(|c| c.surface += 1);
+        self.nets.surface(tape, i, uv)
+    }
+    fn sigma(&self, tape: &mut Tape) -> Var {
+        self.nets.sigma(tape)
+    }
+    fn normal_grid(&self, tape: &mut Tape, i: usize) -> (Var, usize) {
+        self.nets.normal_grid(tape, i)
     }
 }
 
@@ -201,6 +249,43 @@ impl Scene {
     /// Records `loss` with the parameters `v` and returns its Var.
     fn record(&self, tape: &mut Tape, v: &[Var], loss: &dyn Loss) -> Var {
         let nets = self.nets(v);
+        self.with_context(tape, &nets, Some(Reads::NOTHING), |ctx| {
+            loss.evaluate(ctx).expect("built-in losses do not fail on a valid scene")
+        })
+    }
+
+    /// The sum of `losses` and its gradient with respect to every parameter, recorded on a context
+    /// told `reads` (`None`: a context that never stacks evaluations), and how often each network
+    /// ran.
+    pub fn total_and_gradients(
+        &self,
+        losses: &[&dyn Loss],
+        reads: Option<Reads>,
+    ) -> (f32, Vec<Vec<f32>>, Evaluations) {
+        let mut tape = Tape::default();
+        let params = self.params();
+        let leaves: Vec<Var> = params.iter().map(|t| tape.leaf(t)).collect();
+        let nets = Counted { nets: self.nets(&leaves), counts: Default::default() };
+        let total = self.with_context(&mut tape, &nets, reads, |ctx| {
+            let terms: Vec<Var> =
+                losses.iter().map(|l| l.evaluate(ctx).expect("built-in losses do not fail")).collect();
+            terms.into_iter().reduce(|a, b| ctx.tape.add(a, b)).expect("at least one loss")
+        });
+        tape.backward(total);
+        let grads = (leaves.iter().zip(&params))
+            .map(|(&l, t)| tape.grad(l).map(<[f32]>::to_vec).unwrap_or_else(|| vec![0.0; t.data().len()]))
+            .collect();
+        (tape.scalar(total), grads, nets.counts.get())
+    }
+
+    /// Runs `f` on a context of this scene's step data over `nets`.
+    fn with_context<R>(
+        &self,
+        tape: &mut Tape,
+        nets: &dyn Networks,
+        reads: Option<Reads>,
+        f: impl FnOnce(&mut StepContext<'_>) -> R,
+    ) -> R {
         let k = self.distortion_samples.unwrap_or(self.normals.len());
         let (p, q) = tangents(&self.normals[..k]);
         let data = StepData {
@@ -212,8 +297,12 @@ impl Scene {
             epsilon: self.epsilon,
             chart_support: self.chart_support,
         };
-        let mut ctx = StepContext::new(tape, &nets, data);
-        loss.evaluate(&mut ctx).expect("built-in losses do not fail on a valid scene")
+        let ctx = StepContext::new(tape, nets, data);
+        let mut ctx = match reads {
+            Some(reads) => ctx.reading(reads),
+            None => ctx.never_stacking(),
+        };
+        f(&mut ctx)
     }
 
     /// The loss value.

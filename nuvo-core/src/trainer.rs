@@ -11,7 +11,7 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use nuvo_autodiff::optim::{Adam, AdamConfig, CosineSchedule};
 use nuvo_autodiff::{ParamStore, Shape, Tape, Var};
 use nuvo_geometry::{BuildContext, GeometryError, GeometrySource, SourceRegistry};
-use nuvo_losses::{Loss, LossError, LossRegistry, Networks, StepContext};
+use nuvo_losses::{Loss, LossError, LossRegistry, Networks, Reads, StepContext};
 
 use crate::batch::{BatchSizes, ShortBatch, StepBatch};
 use crate::checkpoint::{AdamState, Checkpoint, CheckpointError};
@@ -405,16 +405,18 @@ impl Trainer {
         self.tape.params_mut().zero_grads();
         let training = &self.config.training;
         let data = self.batch.data(training.epsilon, self.chart_support_at(self.step));
-        let mut ctx = StepContext::new(&mut self.tape, &self.model, data);
+        let step = self.step;
+        let evaluated = |k: usize, term: &Term| only.is_none_or(|o| o == k) && term.weight_at(step) > 0.0;
+        let reads = (self.terms.iter().enumerate())
+            .filter(|&(k, term)| evaluated(k, term))
+            .fold(Reads::NOTHING, |r, (_, term)| r.union(term.loss.reads()));
+        let mut ctx = StepContext::new(&mut self.tape, &self.model, data).reading(reads);
         let mut total: Option<Var> = None;
         for (k, term) in self.terms.iter().enumerate() {
-            if only.is_some_and(|o| o != k) {
+            if !evaluated(k, term) {
                 continue;
             }
             let weight = term.weight_at(self.step);
-            if weight <= 0.0 {
-                continue;
-            }
             let v = term.loss.evaluate(&mut ctx)?;
             values.push((term.name.clone(), ctx.tape.scalar(v)));
             total = Some(add_weighted(ctx.tape, total, v, weight));

@@ -2,7 +2,7 @@
 
 use nuvo_autodiff::Var;
 
-use crate::context::{ChartRows, Samples, StepContext};
+use crate::context::{ChartRows, Reads, Samples, StepContext};
 use crate::loss::{Loss, LossError, chart_weighted_mean, squared_distance};
 use crate::registry::{LossInfo, RegisteredLoss, no_options};
 
@@ -39,6 +39,10 @@ impl Loss for Cycle3d {
             .collect();
         Ok(chart_weighted_mean(ctx, &per_chart))
     }
+
+    fn reads(&self) -> Reads {
+        Reads { cycle_points: true, ..Reads::NOTHING }
+    }
 }
 
 impl RegisteredLoss for Cycle2d {
@@ -69,6 +73,10 @@ impl Loss for Cycle2d {
         let all = if per_chart.len() == 1 { per_chart[0] } else { t.concat_cols(&per_chart) };
         let s = t.sum_all(all);
         Ok(t.scale(s, 1.0 / bu))
+    }
+
+    fn reads(&self) -> Reads {
+        Reads { surface_points: true, ..Reads::NOTHING }
     }
 }
 

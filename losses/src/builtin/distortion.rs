@@ -4,7 +4,7 @@
 use nuvo_autodiff::Var;
 use serde::Deserialize;
 
-use crate::context::{ChartRows, Samples, StepContext};
+use crate::context::{ChartRows, Reads, Samples, StepContext};
 use crate::loss::{Loss, LossError, chart_weighted_mean};
 use crate::registry::{LossInfo, OptionDoc, RegisteredLoss, no_options, parse_options};
 
@@ -86,6 +86,10 @@ impl Loss for Conformal {
             })
             .collect();
         Ok(chart_weighted_mean(ctx, &per_chart))
+    }
+
+    fn reads(&self) -> Reads {
+        Reads { uv_differentials: true, ..Reads::NOTHING }
     }
 }
 
@@ -187,6 +191,10 @@ impl Loss for Stretch {
             })
             .collect();
         Ok(chart_weighted_mean(ctx, &per_chart))
+    }
+
+    fn reads(&self) -> Reads {
+        Reads { uv_differentials: true, ..Reads::NOTHING }
     }
 }
 

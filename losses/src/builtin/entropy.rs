@@ -2,7 +2,7 @@
 
 use nuvo_autodiff::{Shape, Var};
 
-use crate::context::StepContext;
+use crate::context::{Reads, StepContext};
 use crate::loss::{Loss, LossError};
 use crate::registry::{LossInfo, RegisteredLoss, no_options};
 
@@ -42,6 +42,10 @@ impl Loss for Entropy {
         let picked = t.mul(log_probs, mask);
         let s = t.sum_all(picked);
         Ok(t.scale(s, -1.0 / bu.max(1) as f32))
+    }
+
+    fn reads(&self) -> Reads {
+        Reads { surface_points: true, ..Reads::NOTHING }
     }
 }
 

@@ -4,7 +4,7 @@ use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nuvo_autodiff::Var;
 use rayon::prelude::*;
 
-use crate::context::StepContext;
+use crate::context::{Reads, StepContext};
 use crate::loss::{Loss, LossError, squared_distance};
 use crate::registry::{LossInfo, RegisteredLoss, no_options};
 
@@ -59,6 +59,10 @@ impl Loss for Surface {
         let m_x = t.mean_all(d_x);
         let m_s = t.mean_all(d_s);
         Ok(t.add(m_x, m_s))
+    }
+
+    fn reads(&self) -> Reads {
+        Reads { surface_points: true, ..Reads::NOTHING }
     }
 }
 
