@@ -20,8 +20,9 @@ How it mirrors the Rust step (nuvo-core/src/trainer.rs, model.rs, losses/src/con
     surface s_i: degree 4 on u - 1/2, identity output. `depth` Linear layers, `depth - 1` of them
     `width` wide with ReLU; PyTorch's default init U(+-1/sqrt(fan_in)) (our default `init = "torch"`);
   * sigma (init 1) and one normal grid per chart, round(256 sqrt(2/n)) texels a side, zeros;
-  * the same evaluations: c(x); t_i(x), t_i(x + eps p), t_i(x + eps q) as three separate calls;
-    s_i(t_i(x)); s_i(u) with u shared by all charts; t_i(s_i(u)); c on all s_i(u) stacked, once;
+  * the same evaluations: c(x); t_i on x, x + eps p and x + eps q stacked in one call; s_i on
+    t_i(x) and u (shared by all charts) stacked in one call; t_i(s_i(u)); c on all s_i(u) stacked,
+    once (the context's "Evaluations stacked");
   * the same loss formulas, floors and normalisations (cycle_3d, cycle_2d, entropy, surface, cluster,
     conformal, stretch with area = "paper", unsigned, texture with a bilinear lookup, align-corners);
   * Chamfer nearest neighbours from kd-trees (scipy cKDTree, queried with `--threads` workers) built
@@ -156,13 +157,17 @@ def losses(model, x, normals, u, tp, tq):
         return (torch.cat(per_chart, dim=1) * c).sum() / B
 
     xp, xq = x + EPSILON * tp, x + EPSILON * tq
-    t = [model.tex[i](x) for i in range(n)]
-    dp, dq = [], []
-    for i in range(n):  # finite-difference UV vectors D t_i(eps p), D t_i(eps q)
-        dp.append(model.tex[i](xp) - t[i])
-        dq.append(model.tex[i](xq) - t[i])
-    cyc3 = [model.surf[i](t[i]) for i in range(n)]
-    s = [model.surf[i](u) for i in range(n)]
+    t, dp, dq = [], [], []
+    for i in range(n):  # t_i(x) and the finite-difference UV vectors D t_i(eps p), D t_i(eps q)
+        ti, tpi, tqi = model.tex[i](torch.cat([x, xp, xq])).split(B)  # one stacked evaluation
+        t.append(ti)
+        dp.append(tpi - ti)
+        dq.append(tqi - ti)
+    cyc3, s = [], []
+    for i in range(n):  # s_i(t_i(x)) and s_i(u), one stacked evaluation
+        back, si = model.surf[i](torch.cat([t[i], u])).split([B, T])
+        cyc3.append(back)
+        s.append(si)
     cyc2 = [model.tex[i](s[i]) for i in range(n)]
     s_all = torch.cat(s, dim=0)  # n|T| x 3, chart 0 first
     log_c_s = torch.log_softmax(model.chart(s_all), dim=1)  # n|T| x n
