@@ -684,7 +684,6 @@ mod tests {
     #[test]
     fn stacked_evaluations_give_the_values_and_gradients_of_separate_ones_in_fewer_evaluations() {
         let (losses, reads) = paper_losses();
-        let losses: Vec<&dyn Loss> = losses.iter().map(|l| &**l).collect();
         for (name, scene) in scenes() {
             let (apart, apart_grads, apart_counts) = scene.total_and_gradients(&losses, None);
             let (stacked, stacked_grads, stacked_counts) = scene.total_and_gradients(&losses, Some(reads));
@@ -708,7 +707,6 @@ mod tests {
         // Nothing declared: a quantity's own inputs are still stacked (the differentials ask for
         // t_i on the chart's rows and both offsets at once), but s_i(t_i(x)) and s_i(u) are apart.
         let (losses, _) = paper_losses();
-        let losses: Vec<&dyn Loss> = losses.iter().map(|l| &**l).collect();
         for (name, scene) in scenes() {
             let (apart, _, _) = scene.total_and_gradients(&losses, None);
             let (undeclared, _, counts) = scene.total_and_gradients(&losses, Some(Reads::NOTHING));

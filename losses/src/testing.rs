@@ -259,7 +259,7 @@ impl Scene {
     /// ran.
     pub fn total_and_gradients(
         &self,
-        losses: &[&dyn Loss],
+        losses: &[Box<dyn Loss>],
         reads: Option<Reads>,
     ) -> (f32, Vec<Vec<f32>>, Evaluations) {
         let mut tape = Tape::default();
