@@ -448,67 +448,17 @@ fn bake_and_measure(
     } else {
         None
     };
-    let side = opts.atlas_resolution.min(2048);
-    let checker = checkerboard(side, checker_cells(layout.columns).min(side))?;
-    write_png(&path(names::CHECKER), &checker)?;
-    files.push(path(names::CHECKER));
-    // Encoded once: the file and the GLB's embedded image are the same bytes.
-    let texture_png = texture.as_ref().map(|(image, _)| png_bytes(image)).transpose()?;
-    if let Some(bytes) = &texture_png {
-        let p = path(names::TEXTURE);
-        nuvo_fsio::write_bytes_atomic(&p, bytes).map_err(io_err(&p))?;
-        files.push(p);
-    }
-    let (texture_image, texture_name) = match &texture {
-        Some((image, _)) => (image, names::TEXTURE),
-        None => (&checker, names::CHECKER),
-    };
-    // Writers get the input's own positions when there are any (bit for bit), else map back.
-    let (export, export_frame) = match input_positions {
-        Some(positions) if positions.len() == baked.mesh.positions.len() => {
-            let m = &baked.mesh;
-            (TriMesh { positions, triangles: m.triangles.clone(), uv: m.uv.clone() }, Similarity::IDENTITY)
-        }
-        _ => (baked.mesh.clone(), frame),
-    };
-    write_obj(&path(names::OBJ), &export, &export_frame, Some(Path::new(texture_name)))?;
-    files.push(path(names::OBJ));
-    files.push(path(names::OBJ).with_extension("mtl"));
-    let png = match texture_png {
-        Some(bytes) => bytes,
-        None => png_bytes(&checker)?,
-    };
-    write_glb(
-        &path(names::GLB),
-        &export,
-        &export_frame,
-        &GlbOptions { normals: true, texture_png: Some(&png) },
-    )?;
-    files.push(path(names::GLB));
-    let map = serde_json::to_string(&VertexMap {
-        about: "for each vertex of atlas.glb, the index (0-based) of the input mesh vertex it copies",
-        glb_to_input: glb_vertex_map(&export)?,
-    })
-    .map_err(|e| io_err(&path(names::VERTEX_MAP))(std::io::Error::other(e)))?;
-    drop(export);
-    nuvo_fsio::write_bytes_atomic(&path(names::VERTEX_MAP), map.as_bytes())
-        .map_err(io_err(&path(names::VERTEX_MAP)))?;
-    files.push(path(names::VERTEX_MAP));
-    phases.done("export");
-    write_png(
-        &path(names::LAYOUT),
-        &uv_layout(&baked.mesh, Some(&baked.face_chart), opts.atlas_resolution.min(2048))?,
-    )?;
-    files.push(path(names::LAYOUT));
-    files.extend(write_renders(&baked.mesh, texture_image, dir, opts)?);
-    files.push(write_normal_grids(atlas, &layout, dir)?);
-    phases.done("pictures");
-
+    // The files and the metrics read the finished layout only: written on one side while the
+    // metrics render on the other (the writers use one core for a good part of their time).
     let eval =
         EvalOptions { views: opts.eval_views, resolution: opts.eval_resolution, ..EvalOptions::default() };
-    let metrics = evaluate(&baked.mesh, &eval)?;
+    let (written, metrics) = rayon::join(
+        || write_atlas_files(&baked, texture.as_ref(), input_positions, &frame, atlas, &layout, dir, opts),
+        || evaluate(&baked.mesh, &eval),
+    );
+    files.extend(written?);
     let summary = OutputMetrics {
-        metrics,
+        metrics: metrics?,
         bake: summarize(&baked.report, recount.as_ref(), &baked.face_chart, n),
         layout: finished,
         steps: atlas.steps(),
@@ -519,7 +469,7 @@ fn bake_and_measure(
     nuvo_fsio::write_bytes_atomic(&path(names::METRICS), json.as_bytes())
         .map_err(io_err(&path(names::METRICS)))?;
     files.push(path(names::METRICS));
-    phases.done("metrics");
+    phases.done("export, pictures, metrics");
     Ok(OutputReport {
         files,
         phase_seconds: phases.seconds,
@@ -601,6 +551,79 @@ fn bake_appearance(
         TextureOptions { resolution: opts.atlas_resolution, supersampling: opts.texture_supersampling };
     let baked = bake_texture(mesh, &lookup, &texture_opts)?;
     Ok(Some((baked.image, TextureSummary { from, lookup: kind, texels: baked.report })))
+}
+
+/// Writes the atlas's files into `dir` (the checker, the texture, the OBJ, GLB and vertex map,
+/// the layout picture, the renders and the normal grids), returning their paths in that order.
+/// Reads the finished layout only, so [`bake_and_measure`] runs it beside the metrics.
+#[allow(clippy::too_many_arguments)]
+fn write_atlas_files(
+    baked: &nuvo_atlas::bake::Baked,
+    texture: Option<&(nuvo_atlas::pictures::RgbImage, TextureSummary)>,
+    input_positions: Option<Vec<[f32; 3]>>,
+    frame: &Similarity,
+    atlas: &TrainedAtlas,
+    layout: &AtlasLayout,
+    dir: &Path,
+    opts: &OutputConfig,
+) -> Result<Vec<PathBuf>, OutputError> {
+    let mut files = Vec::new();
+    let path = |name: &str| dir.join(name);
+    let side = opts.atlas_resolution.min(2048);
+    let checker = checkerboard(side, checker_cells(layout.columns).min(side))?;
+    write_png(&path(names::CHECKER), &checker)?;
+    files.push(path(names::CHECKER));
+    // Encoded once: the file and the GLB's embedded image are the same bytes.
+    let texture_png = texture.as_ref().map(|(image, _)| png_bytes(image)).transpose()?;
+    if let Some(bytes) = &texture_png {
+        let p = path(names::TEXTURE);
+        nuvo_fsio::write_bytes_atomic(&p, bytes).map_err(io_err(&p))?;
+        files.push(p);
+    }
+    let (texture_image, texture_name) = match &texture {
+        Some((image, _)) => (image, names::TEXTURE),
+        None => (&checker, names::CHECKER),
+    };
+    // Writers get the input's own positions when there are any (bit for bit), else map back.
+    let (export, export_frame) = match input_positions {
+        Some(positions) if positions.len() == baked.mesh.positions.len() => {
+            let m = &baked.mesh;
+            (TriMesh { positions, triangles: m.triangles.clone(), uv: m.uv.clone() }, Similarity::IDENTITY)
+        }
+        _ => (baked.mesh.clone(), *frame),
+    };
+    write_obj(&path(names::OBJ), &export, &export_frame, Some(Path::new(texture_name)))?;
+    files.push(path(names::OBJ));
+    files.push(path(names::OBJ).with_extension("mtl"));
+    let png = match texture_png {
+        Some(bytes) => bytes,
+        None => png_bytes(&checker)?,
+    };
+    write_glb(
+        &path(names::GLB),
+        &export,
+        &export_frame,
+        &GlbOptions { normals: true, texture_png: Some(&png) },
+    )?;
+    files.push(path(names::GLB));
+    let map = serde_json::to_string(&VertexMap {
+        about: "for each vertex of atlas.glb, the index (0-based) of the input mesh vertex it copies",
+        glb_to_input: glb_vertex_map(&export)?,
+    })
+    .map_err(|e| io_err(&path(names::VERTEX_MAP))(std::io::Error::other(e)))?;
+    drop(export);
+    nuvo_fsio::write_bytes_atomic(&path(names::VERTEX_MAP), map.as_bytes())
+        .map_err(io_err(&path(names::VERTEX_MAP)))?;
+    files.push(path(names::VERTEX_MAP));
+    write_png(
+        &path(names::LAYOUT),
+        &uv_layout(&baked.mesh, Some(&baked.face_chart), opts.atlas_resolution.min(2048))?,
+    )?;
+    files.push(path(names::LAYOUT));
+    files.extend(write_renders(&baked.mesh, texture_image, dir, opts)?);
+    files.push(write_normal_grids(atlas, layout, dir)?);
+
+    Ok(files)
 }
 
 /// The bake's counts; flips, overlaps and degenerate faces from `recount` when refinement or
