@@ -263,7 +263,7 @@ pub const UNWRAP_EQUIAREAL: f64 = 32.0;
 /// (BENCHMARKS.md, "Thin walls").
 pub const RAGGED_CUT: f64 = 8.0;
 
-/// Smoothness of the labelling of a thin wall's sides ([`Patch::sides`]): an edge between the
+/// Smoothness of the labelling of a thin wall's sides (`Patch::sides`): an edge between the
 /// sides costs this many mean edge lengths times its own rest length, times how little the
 /// surface bends across it (`(1 + cos θ) / 2` of the angle between the faces' normals: the rim
 /// where the wall turns back costs little), against each face's rest area for a label other

@@ -901,7 +901,7 @@ fn best_shapes(
     Some(search_orders(islands, res, gutter, rotate, (scale, placed), start, search))
 }
 
-/// Packing attempts of the order search ([`search_orders`]) in `nuvo unwrap`'s final layout.
+/// Packing attempts of the order search (`search_orders`) in `nuvo unwrap`'s final layout.
 /// Re-bakes of the 14 Common Shapes checkpoints (BENCHMARKS.md, "An order search after the
 /// bisection"): packing efficiency 0.5896 → 0.5991 (the bunny 0.584 → 0.632, the horse 0.470 →
 /// 0.489, some meshes unchanged), Editability unchanged, the pack phase 0.66 → 1.06 s a mesh.

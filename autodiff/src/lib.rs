@@ -21,7 +21,7 @@
 //! Invariants worth knowing:
 //! - Gradients of parameters accumulate in the [`ParamStore`] until `zero_grads`.
 //! - Buffers are pooled: after the first step of a fixed-shape loop, steps allocate almost nothing.
-//! - Every kernel is deterministic whatever the thread count (see [`kernels`](crate::kernels)).
+//! - Every kernel is deterministic whatever the thread count (see the `kernels` module).
 
 mod bf16;
 pub mod gradcheck;

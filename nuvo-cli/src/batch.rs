@@ -20,7 +20,7 @@ use nuvo_fsio::write_bytes_atomic;
 
 #[derive(clap::Args)]
 pub struct BatchArgs {
-    /// The manifest: one input per line, or a .csv (input,name,set) or .toml ([[item]] input, name,
+    /// The manifest: one input per line, or a .csv (input,name,set) or .toml (`[[item]]` input, name,
     /// set) with per-item names and `--set` overrides; relative paths are relative to it.
     #[arg(required_unless_present = "summary", value_name = "MANIFEST")]
     manifest: Option<PathBuf>,

@@ -5,7 +5,7 @@
 //! - [`trainer`]: one deterministic optimisation step at a time;
 //! - [`trained`]: a trained atlas (networks, parameters, frame), from a trainer or a checkpoint, which
 //!   evaluation, baking and export take;
-//! - [`run`]: the output folder, checkpoints, log, resume, budget and NaN rollback;
+//! - [`mod@run`]: the output folder, checkpoints, log, resume, budget and NaN rollback;
 //! - [`checkpoint`]: the safetensors checkpoint format;
 //! - [`ablation`]: sweeps of config variants and the paper's ablation table;
 //! - [`manifest`] and [`batch_record`]: `nuvo batch`'s items and shards, and what each item leaves

@@ -3,7 +3,7 @@
 //! A step draws its batch from `(seed, step)`, records every enabled loss on the tape through one
 //! shared [`StepContext`], sums the weighted terms, runs backward once and takes an Adam step. A term
 //! or gradient that is NaN or infinite skips the step (parameters untouched) and the outcome names the
-//! term responsible; the run loop ([`crate::run`]) rolls back after too many skipped steps.
+//! term responsible; the run loop ([`crate::run()`]) rolls back after too many skipped steps.
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -307,7 +307,7 @@ impl Trainer {
     /// The step runs on a rayon worker thread: the engine's parallel kernels then fork and join
     /// inside the pool instead of each handing its work over from the calling thread and sleeping
     /// until it is done (a futex round trip per kernel, measured at several percent of a small step).
-    /// While it runs, the pool's other threads stay awake on its jobs ([`keep_busy`]).
+    /// While it runs, the pool's other threads stay awake on its jobs (`keep_busy`).
     pub fn step(&mut self) -> Result<StepOutcome, TrainError> {
         let done = AtomicBool::new(false);
         rayon::scope(|scope| {

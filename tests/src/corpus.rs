@@ -1,7 +1,7 @@
 //! Malformed inputs for every file the CLI reads: geometry (OBJ, glTF/GLB, PLY, XYZ, NPY), experiment
 //! configs (TOML) and loss plugins.
 //!
-//! [`write`] creates the files in a folder and returns one [`Case`] per input, each with the config
+//! [`write()`] creates the files in a folder and returns one [`Case`] per input, each with the config
 //! that makes `nuvo train` read it and the words its error must contain. Invariant: every case is
 //! wrong in exactly one way that a user could plausibly produce (a typo, a half-written download, a
 //! broken exporter), and none of them may make the CLI panic, hang or leave complete-looking output.

@@ -9,7 +9,7 @@ mod texture;
 
 pub use cluster::Cluster;
 pub use cycle::{Cycle2d, Cycle3d};
-pub use distortion::{Conformal, Stretch, StretchOptions};
+pub use distortion::{AreaScale, Conformal, Stretch, StretchOptions};
 pub use entropy::Entropy;
 pub use surface::Surface;
 pub use texture::Texture;
