@@ -739,6 +739,63 @@ mod tests {
         o
     }
 
+    /// `best_fit` against testing every position texel by texel, on random atlases (blocks and
+    /// scattered texels) and random footprints (rows of one or two runs): the same position and
+    /// key under every rule, or no fit for both. The search's row order and jumps must not
+    /// change which position is found.
+    #[test]
+    fn best_fit_finds_what_testing_every_position_finds() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
+        let bit = |o: &Occupancy, x: u32, y: u32| o.row(y)[x as usize / 64] >> (x % 64) & 1 == 1;
+        for case in 0..300 {
+            let side = rng.random_range(8..90);
+            let mut o = Occupancy::new(side, rng.random_range(0..3));
+            for _ in 0..rng.random_range(0..12) {
+                let (x, y) = (rng.random_range(0..side), rng.random_range(0..side));
+                let (w, h) = (rng.random_range(1..side / 2 + 2), rng.random_range(1..side / 2 + 2));
+                for yy in y..(y + h).min(side) {
+                    o.fill(yy, x, (x + w - 1).min(side - 1));
+                }
+            }
+            for _ in 0..rng.random_range(0..40) {
+                let (x, y) = (rng.random_range(0..side), rng.random_range(0..side));
+                o.fill(y, x, x);
+            }
+            for y in 0..side {
+                o.longest_free[y as usize] = o.measure_longest_free(y);
+            }
+            let (w, h) = (rng.random_range(1..12u32), rng.random_range(1..12u32));
+            let rows: Vec<Vec<(u32, u32)>> = (0..h)
+                .map(|_| {
+                    let a = rng.random_range(0..w);
+                    let b = rng.random_range(a..w);
+                    if b + 2 < w && rng.random_bool(0.3) {
+                        vec![(a, b), (rng.random_range(b + 2..w), w - 1)]
+                    } else {
+                        vec![(a, b)]
+                    }
+                })
+                .collect();
+            let fp = Footprint { w, h, rows, shift: [0.0; 2], turn: [1.0, 0.0] };
+            for rule in [Rule::LowestTop, Rule::Corner, Rule::Square] {
+                let mut want: Option<(Key, u32, u32)> = None;
+                for (y, x) in (0..side).flat_map(|y| (0..side).map(move |x| (y, x))) {
+                    if y + h <= side && x + w <= side {
+                        let fits = fp.rows.iter().enumerate().all(|(r, runs)| {
+                            runs.iter().all(|&(a, b)| (a..=b).all(|c| !bit(&o, x + c, y + r as u32)))
+                        });
+                        let key = rule.key(&fp, x, y);
+                        if fits && want.is_none_or(|(k, ..)| key < k) {
+                            want = Some((key, x, y));
+                        }
+                    }
+                }
+                assert_eq!(o.best_fit(&fp, rule), want, "case {case}, {rule:?}");
+            }
+        }
+    }
+
     #[test]
     fn each_rule_takes_the_position_its_key_ranks_first() {
         // A 6 × 2 block in the corner; a 3 × 3 square fits right of it on the floor (top 3,
