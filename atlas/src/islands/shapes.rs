@@ -591,8 +591,7 @@ mod tests {
         for len in [1, 5, 16, 17, 40, 333] {
             for _ in 0..200 {
                 let free: Vec<u32> = (0..len).map(|_| rng.random_range(0..50)).collect();
-                let need: Vec<u32> = free.iter().map(|&f| f - f.min(rng.random_range(0..3))).collect();
-                let mut need = need;
+                let mut need: Vec<u32> = free.iter().map(|&f| f - f.min(rng.random_range(0..3))).collect();
                 for _ in 0..rng.random_range(0..3) {
                     let r = rng.random_range(0..len);
                     need[r] = free[r] + 1;
