@@ -54,7 +54,7 @@ use nuvo_geometry::{GeometryError, GeometrySource, Similarity, TriMesh};
 use serde::Serialize;
 
 use crate::config::{OutputConfig, Packing};
-use crate::trained::TrainedAtlas;
+use crate::trained::{AtlasFields, TrainedAtlas};
 
 /// Output file names.
 pub mod names {
@@ -413,7 +413,14 @@ fn bake_and_measure(
     let mut phases = Phases::start();
     let n = atlas.charts();
     let frame = atlas.frame();
-    let fields = atlas.evaluate_atlas(&mesh.positions);
+    // The surface networks' pass serves only the round-trip check: half the networks, skipped
+    // when the check is off (the unwrap recipe of fragmented inputs, the paper's configs).
+    let fields = if opts.round_trip_tolerance > 0.0 {
+        atlas.evaluate_atlas(&mesh.positions)
+    } else {
+        let (probs, uvs) = atlas.evaluate_charts(&mesh.positions);
+        AtlasFields { probs, uvs, round_trip: Vec::new() }
+    };
     phases.done("evaluate");
     let layout = AtlasLayout::grid(n, opts.atlas_resolution, opts.gutter)?;
     let round_trip = (opts.round_trip_tolerance > 0.0)
