@@ -266,7 +266,8 @@ pub struct OutputConfig {
     /// longest bounding-box side, moves to a chart that does, if one keeps it the right way round.
     /// Off (0) by default, as the paper bakes by the probabilities alone. At 0.1 it removes most
     /// overlapping faces of the bunny's atlas at no cost to the scores, but on unruly meshes it
-    /// cuts the charts up (BENCHMARKS.md, "Round-trip check").
+    /// cuts the charts up (BENCHMARKS.md, "Round-trip check"). Off, the bake does not run the
+    /// surface networks at all (they serve only this check).
     pub round_trip_tolerance: f32,
     /// Untangle the bake (not in the paper; `nuvo_atlas::untangle`): move single UV vertices so that
     /// faces the wrong way round in their chart (fold-overs, mostly tiny triangles on creases of a

@@ -415,7 +415,8 @@ fn bake_and_measure(
     let frame = atlas.frame();
     // The surface networks' pass serves only the round-trip check: half the networks, skipped
     // when the check is off (the unwrap recipe of fragmented inputs, the paper's configs).
-    let fields = if opts.round_trip_tolerance > 0.0 {
+    let round_trip_check = opts.round_trip_tolerance > 0.0;
+    let fields = if round_trip_check {
         atlas.evaluate_atlas(&mesh.positions)
     } else {
         let (probs, uvs) = atlas.evaluate_charts(&mesh.positions);
@@ -423,7 +424,7 @@ fn bake_and_measure(
     };
     phases.done("evaluate");
     let layout = AtlasLayout::grid(n, opts.atlas_resolution, opts.gutter)?;
-    let round_trip = (opts.round_trip_tolerance > 0.0)
+    let round_trip = round_trip_check
         .then(|| RoundTrip { distances: &fields.round_trip, tolerance: opts.round_trip_tolerance });
     let options = BakeOptions { untangle: opts.untangle, absorb_enclaves: opts.absorb_enclaves };
     let baked = bake(
