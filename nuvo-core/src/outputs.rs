@@ -445,9 +445,6 @@ fn bake_and_measure(
     .then(|| analyse_uv(&baked.mesh, Some(&baked.face_chart), opts.atlas_resolution))
     .transpose()?;
     phases.done("recount");
-    let mut files = Vec::new();
-    let path = |name: &str| dir.join(name);
-
     let mut warnings = Vec::new();
     let texture = if opts.texture {
         let t = bake_appearance(&baked.mesh, colour_files, &frame, opts, &mut warnings)?;
@@ -464,7 +461,7 @@ fn bake_and_measure(
         || write_atlas_files(&baked, texture.as_ref(), input_positions, &frame, atlas, &layout, dir, opts),
         || evaluate(&baked.mesh, &eval),
     );
-    files.extend(written?);
+    let mut files = written?;
     let summary = OutputMetrics {
         metrics: metrics?,
         bake: summarize(&baked.report, recount.as_ref(), &baked.face_chart, n),
@@ -472,11 +469,11 @@ fn bake_and_measure(
         steps: atlas.steps(),
         texture: texture.map(|(_, summary)| summary),
     };
+    let metrics_path = dir.join(names::METRICS);
     let json = serde_json::to_string_pretty(&summary)
-        .map_err(|e| io_err(&path(names::METRICS))(std::io::Error::other(e)))?;
-    nuvo_fsio::write_bytes_atomic(&path(names::METRICS), json.as_bytes())
-        .map_err(io_err(&path(names::METRICS)))?;
-    files.push(path(names::METRICS));
+        .map_err(|e| io_err(&metrics_path)(std::io::Error::other(e)))?;
+    nuvo_fsio::write_bytes_atomic(&metrics_path, json.as_bytes()).map_err(io_err(&metrics_path))?;
+    files.push(metrics_path);
     phases.done("export, pictures, metrics");
     Ok(OutputReport {
         files,
@@ -582,13 +579,13 @@ fn write_atlas_files(
     write_png(&path(names::CHECKER), &checker)?;
     files.push(path(names::CHECKER));
     // Encoded once: the file and the GLB's embedded image are the same bytes.
-    let texture_png = texture.as_ref().map(|(image, _)| png_bytes(image)).transpose()?;
+    let texture_png = texture.map(|(image, _)| png_bytes(image)).transpose()?;
     if let Some(bytes) = &texture_png {
         let p = path(names::TEXTURE);
         nuvo_fsio::write_bytes_atomic(&p, bytes).map_err(io_err(&p))?;
         files.push(p);
     }
-    let (texture_image, texture_name) = match &texture {
+    let (texture_image, texture_name) = match texture {
         Some((image, _)) => (image, names::TEXTURE),
         None => (&checker, names::CHECKER),
     };
@@ -630,7 +627,6 @@ fn write_atlas_files(
     files.push(path(names::LAYOUT));
     files.extend(write_renders(&baked.mesh, texture_image, dir, opts)?);
     files.push(write_normal_grids(atlas, layout, dir)?);
-
     Ok(files)
 }
 
