@@ -964,6 +964,26 @@ fn corner_angle(q: [[f64; 2]; 3], k: usize) -> f64 {
     (u[0] * v[1] - u[1] * v[0]).atan2(u[0] * v[0] + u[1] * v[1])
 }
 
+/// How the wedge of triangle `q` at corner `k` (from the edge to corner `k + 1` to the edge to
+/// corner `k + 2`) crosses the ray from the corner towards `+x`: `1` counter-clockwise, `−1`
+/// clockwise, `0` not (Sunday's crossing rule on the fan's outer polygon). Summed over the
+/// wedges of a closed fan it is the fan's winding number round its centre, exactly: two fans
+/// that share an edge compute its vector from the same two points, so each crossing is
+/// counted once. For a fan of positive triangles it equals the sum of their angles at the
+/// centre over 2π, which [`corner_angle`] finds with three `atan2` a face.
+fn wedge_crossing(q: [[f64; 2]; 3], k: usize) -> i8 {
+    let (o, a, b) = (q[k], q[(k + 1) % 3], q[(k + 2) % 3]);
+    let (u, w) = ([a[0] - o[0], a[1] - o[1]], [b[0] - o[0], b[1] - o[1]]);
+    let turn = u[0] * w[1] - u[1] * w[0];
+    if u[1] <= 0.0 && w[1] > 0.0 && turn > 0.0 {
+        1
+    } else if w[1] <= 0.0 && u[1] > 0.0 && turn < 0.0 {
+        -1
+    } else {
+        0
+    }
+}
+
 /// `f` of every face index `0..faces`, in order, computed in parallel tasks of at least
 /// [`FACES_PER_TASK`] faces (module docs: the caller folds the values in order).
 fn per_face<T: Send>(faces: usize, f: impl Fn(usize) -> T + Sync + Send) -> Vec<T> {
@@ -1010,7 +1030,7 @@ fn slim_density(j: [[f64; 2]; 2], terms: Terms) -> f64 {
         e += terms.conformal * (f / det - 2.0).max(0.0);
     }
     if terms.orthogonal != 0.0 {
-        e += terms.orthogonal * axes_cos(j).0.powi(2);
+        e += terms.orthogonal * axes_cos_squared(j);
     }
     if terms.equiareal != 0.0 {
         e += terms.equiareal * (det - 1.0).powi(2);
@@ -1026,35 +1046,63 @@ fn slim_density(j: [[f64; 2]; 2], terms: Terms) -> f64 {
 /// scaled). The rows must not be zero (they are not when `det J > 0`).
 fn axes_cos(j: [[f64; 2]; 2]) -> (f64, [[f64; 2]; 2]) {
     let [a, b] = j;
-    let (na, nb) = (a[0].hypot(a[1]), b[0].hypot(b[1]));
+    // Not `hypot`: its care against overflow costs several times a square root, and a
+    // Jacobian's rows are nowhere near `f64`'s range (SLIM floors their singular values).
+    let (na, nb) = ((a[0] * a[0] + a[1] * a[1]).sqrt(), (b[0] * b[0] + b[1] * b[1]).sqrt());
     let c = (a[0] * b[0] + a[1] * b[1]) / (na * nb);
     let d = |r: [f64; 2], o: [f64; 2], nr: f64| [0, 1].map(|k| o[k] / (na * nb) - c * r[k] / (nr * nr));
     (c, [d(a, b, na), d(b, a, nb)])
 }
 
-/// The signed SVD `J = rot(φ) diag(s1, s2) rot(θ)` of a 2×2 matrix (`s1 ≥ |s2|`, `s2 < 0` iff
-/// `det J < 0`), as `(φ, s1, s2, θ)`.
-fn svd2(j: [[f64; 2]; 2]) -> (f64, f64, f64, f64) {
-    let [[a, b], [c, d]] = j;
-    let (e, f, g, h) = ((a + d) / 2.0, (a - d) / 2.0, (c + b) / 2.0, (c - b) / 2.0);
-    let (q, r) = (e.hypot(h), f.hypot(g));
-    let (a1, a2) = (g.atan2(f), h.atan2(e));
-    ((a2 + a1) / 2.0, q + r, q - r, (a2 - a1) / 2.0)
+/// [`axes_cos`]`²` without a square root: `(∇u · ∇v)² / (|∇u|² |∇v|²)`. What the energy reads
+/// on every face at every step of the line search.
+fn axes_cos_squared(j: [[f64; 2]; 2]) -> f64 {
+    let [a, b] = j;
+    let dot = a[0] * b[0] + a[1] * b[1];
+    dot * dot / ((a[0] * a[0] + a[1] * a[1]) * (b[0] * b[0] + b[1] * b[1]))
 }
 
-fn rot(angle: f64) -> [[f64; 2]; 2] {
-    let (s, c) = angle.sin_cos();
-    [[c, -s], [s, c]]
+/// The signed SVD of a 2×2 matrix, `J = rot(φ) diag(s1, s2) rot(θ)` (`s1 ≥ |s2|`, `s2 < 0`
+/// iff `det J < 0`), with the rotations as unit vectors instead of angles: `(cos, sin)` of
+/// `φ + θ` is `sum` and of `φ − θ` is `difference`. Why: SLIM's terms need only these (and
+/// `2φ`, their sum), and the two `atan2`, two `hypot` and three `sin_cos` that the angles took
+/// were a tenth of the `injective` phase's time. Where a part is zero (`s1 = ±s2`) its unit
+/// vector is `(1, 0)`: any is a valid SVD there.
+#[derive(Clone, Copy, Debug)]
+struct Svd2 {
+    s1: f64,
+    s2: f64,
+    sum: [f64; 2],
+    difference: [f64; 2],
 }
 
-fn mul(a: [[f64; 2]; 2], b: [[f64; 2]; 2]) -> [[f64; 2]; 2] {
-    let mut m = [[0.0; 2]; 2];
-    for r in 0..2 {
-        for c in 0..2 {
-            m[r][c] = a[r][0] * b[0][c] + a[r][1] * b[1][c];
-        }
+impl Svd2 {
+    fn of(j: [[f64; 2]; 2]) -> Svd2 {
+        let [[a, b], [c, d]] = j;
+        let (e, f, g, h) = ((a + d) / 2.0, (a - d) / 2.0, (c + b) / 2.0, (c - b) / 2.0);
+        let (q, r) = ((e * e + h * h).sqrt(), (f * f + g * g).sqrt());
+        let unit = |x: f64, y: f64, n: f64| if n > 0.0 { [x / n, y / n] } else { [1.0, 0.0] };
+        Svd2 { s1: q + r, s2: q - r, sum: unit(e, h, q), difference: unit(f, g, r) }
     }
-    m
+
+    /// `rot(φ) diag(x1, x2) rot(−φ)`: the symmetric matrix with eigenvalues `x1`, `x2` along
+    /// the columns of `U = rot(φ)`.
+    fn along_u(&self, x1: f64, x2: f64) -> [[f64; 2]; 2] {
+        // 2φ = (φ + θ) + (φ − θ).
+        let [cs, ss] = self.sum;
+        let [cd, sd] = self.difference;
+        let (c2, s2) = (cs * cd - ss * sd, ss * cd + cs * sd);
+        let (m, h) = ((x1 + x2) / 2.0, (x1 - x2) / 2.0);
+        [[m + h * c2, h * s2], [h * s2, m - h * c2]]
+    }
+
+    /// `rot(φ) diag(y1, y2) rot(θ)`: `J` with its singular values replaced.
+    fn with_values(&self, y1: f64, y2: f64) -> [[f64; 2]; 2] {
+        let [cs, ss] = self.sum;
+        let [cd, sd] = self.difference;
+        let (m, h) = ((y1 + y2) / 2.0, (y1 - y2) / 2.0);
+        [[m * cs + h * cd, -m * ss + h * sd], [m * ss + h * sd, m * cs - h * cd]]
+    }
 }
 
 /// The combinatorics of a patch.
@@ -1264,23 +1312,34 @@ impl Patch {
         if !self.topology.manifold || p.iter().flatten().any(|x| !x.is_finite()) {
             return false;
         }
-        let corner_angles = per_face(self.corners.len(), |t| {
-            let q = self.corners[t].map(|i| p[i as usize]);
-            (!self.collapsed[t] && is_positive(area2(q))).then(|| [0, 1, 2].map(|k| corner_angle(q, k)))
+        // Per corner: its wedge's crossing of the ray to +x (the winding of an inner unknown's
+        // fan, exactly, with no angle taken), and its angle where the unknown is on the
+        // boundary (the turn round a boundary point, below).
+        let on_boundary = &self.topology.on_boundary;
+        let corners = per_face(self.corners.len(), |t| {
+            let c = self.corners[t];
+            let q = c.map(|i| p[i as usize]);
+            (!self.collapsed[t] && is_positive(area2(q))).then(|| {
+                let angles =
+                    [0, 1, 2].map(|k| if on_boundary[c[k] as usize] { corner_angle(q, k) } else { 0.0 });
+                (angles, [0, 1, 2].map(|k| wedge_crossing(q, k)))
+            })
         });
         let mut angle = vec![0.0f64; self.n];
+        let mut winding = vec![0i32; self.n];
         for (t, c) in self.live() {
-            let Some(a) = corner_angles[t] else { return false };
+            let Some((a, w)) = corners[t] else { return false };
             for k in 0..3 {
                 angle[c[k] as usize] += a[k];
+                winding[c[k] as usize] += i32::from(w[k]);
             }
         }
-        let tau = std::f64::consts::TAU;
-        if (0..self.n)
-            .any(|v| !self.topology.on_boundary[v] && angle[v] > 0.0 && (angle[v] - tau).abs() > 0.5 * tau)
-        {
+        // Round an inner unknown every face is positive, so its angles sum to 2π times the
+        // winding of its fan: once round it, not twice (nor 0: an unknown in no live face).
+        if (0..self.n).any(|v| !on_boundary[v] && winding[v] != 0 && winding[v] != 1) {
             return false;
         }
+        let tau = std::f64::consts::TAU;
         // The fans at one boundary point (one unknown, or several at the very same position
         // where the island touches itself) turn at most once round it. A fan that turns further
         // lays its last faces over its first, and no boundary crossing shows it: the two
@@ -2917,8 +2976,8 @@ fn triangle_zero_step(q: [[f64; 2]; 3], d: [[f64; 2]; 3]) -> f64 {
 fn slim_terms(rest: &Rest, q: [[f64; 2]; 3], terms: Terms) -> Option<FaceRows> {
     let conformal = terms.conformal;
     let j = rest.jacobian(q);
-    let (phi, s1, s2, theta) = svd2(j);
-    let (s1, s2) = (s1.max(WEIGHT_SIGMA_FLOOR), s2.max(WEIGHT_SIGMA_FLOOR));
+    let svd = Svd2::of(j);
+    let (s1, s2) = (svd.s1.max(WEIGHT_SIGMA_FLOOR), svd.s2.max(WEIGHT_SIGMA_FLOOR));
     // Symmetric Dirichlet: w² = f'(σ) / (2 (σ − 1)) = (σ + 1)(σ² + 1) / σ³.
     let dirichlet = |s: f64| (s + 1.0) * (s * s + 1.0) / (s * s * s);
     // Conformal, λ (σ₁/σ₂ + σ₂/σ₁ − 2): w₁² = λ (σ₁ + σ₂)(√σ₁ + √σ₂) / (2 σ₁² σ₂ √σ₁), and w₂²
@@ -2930,12 +2989,8 @@ fn slim_terms(rest: &Rest, q: [[f64; 2]; 3], terms: Terms) -> Option<FaceRows> {
     let (d1, d2) = (dirichlet(s1), dirichlet(s2));
     let (o1, o2) = (d1 + c1, d2 + c2);
     let (t1, t2) = ((d1 + c1 * g) / o1, (d2 + c2 * g) / o2);
-    let w = mul(mul(rot(phi), [[o1.sqrt(), 0.0], [0.0, o2.sqrt()]]), rot(-phi));
-    let wr = if conformal == 0.0 {
-        mul(w, rot(phi + theta))
-    } else {
-        mul(mul(rot(phi), [[o1.sqrt() * t1, 0.0], [0.0, o2.sqrt() * t2]]), rot(theta))
-    };
+    let w = svd.along_u(o1.sqrt(), o2.sqrt());
+    let wr = svd.with_values(o1.sqrt() * t1, o2.sqrt() * t2);
     let mut rows = [[0.0f64; 6]; 6];
     let mut targets = [0.0f64; 6];
     for r in 0..2 {
@@ -3395,6 +3450,31 @@ mod tests {
     use crate::testmesh::grid;
     use crate::uvstats::analyse_uv;
 
+    /// The signed SVD `J = rot(φ) diag(s1, s2) rot(θ)` of a 2×2 matrix (`s1 ≥ |s2|`, `s2 < 0` iff
+    /// `det J < 0`), as `(φ, s1, s2, θ)`.
+    fn svd2(j: [[f64; 2]; 2]) -> (f64, f64, f64, f64) {
+        let [[a, b], [c, d]] = j;
+        let (e, f, g, h) = ((a + d) / 2.0, (a - d) / 2.0, (c + b) / 2.0, (c - b) / 2.0);
+        let (q, r) = (e.hypot(h), f.hypot(g));
+        let (a1, a2) = (g.atan2(f), h.atan2(e));
+        ((a2 + a1) / 2.0, q + r, q - r, (a2 - a1) / 2.0)
+    }
+
+    fn rot(angle: f64) -> [[f64; 2]; 2] {
+        let (s, c) = angle.sin_cos();
+        [[c, -s], [s, c]]
+    }
+
+    fn mul(a: [[f64; 2]; 2], b: [[f64; 2]; 2]) -> [[f64; 2]; 2] {
+        let mut m = [[0.0; 2]; 2];
+        for r in 0..2 {
+            for c in 0..2 {
+                m[r][c] = a[r][0] * b[0][c] + a[r][1] * b[1][c];
+            }
+        }
+        m
+    }
+
     #[test]
     fn the_signed_svd_reconstructs_the_matrix() {
         for j in [
@@ -3412,6 +3492,40 @@ mod tests {
             }
             let det = j[0][0] * j[1][1] - j[0][1] * j[1][0];
             assert!(s1 >= s2.abs() - 1e-12 && (s2 < 0.0) == (det < -1e-15), "{j:?}: {s1} {s2}");
+        }
+    }
+
+    /// [`Svd2`] is [`svd2`] without the angles: the same singular values, and the matrices SLIM
+    /// builds from its rotations (`rot(φ) diag rot(−φ)`, `rot(φ) diag rot(θ)`) the same, on
+    /// random matrices of either sign of determinant and on those where a part of the
+    /// decomposition is zero (a similarity, a reflection, zero).
+    #[test]
+    fn the_svd_without_angles_builds_what_the_angles_did() {
+        let mut state = 7u64;
+        let mut draw = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64 * 4.0 - 2.0
+        };
+        let mut cases: Vec<[[f64; 2]; 2]> = (0..200).map(|_| [[draw(), draw()], [draw(), draw()]]).collect();
+        cases.extend([
+            [[1.5, -0.5], [0.5, 1.5]],
+            [[1.0, 0.3], [0.3, -1.0]],
+            [[0.0, 0.0], [0.0, 0.0]],
+            [[2.0, 0.0], [0.0, 2.0]],
+        ]);
+        let close = |a: [[f64; 2]; 2], b: [[f64; 2]; 2]| {
+            (0..4).all(|i| (a[i / 2][i % 2] - b[i / 2][i % 2]).abs() < 1e-12 * (1.0 + b[i / 2][i % 2].abs()))
+        };
+        for j in cases {
+            let (phi, s1, s2, theta) = svd2(j);
+            let svd = Svd2::of(j);
+            assert!((svd.s1 - s1).abs() < 1e-12 && (svd.s2 - s2).abs() < 1e-12, "{j:?}");
+            let (x1, x2) = (draw().abs() + 0.1, draw().abs() + 0.1);
+            let along = mul(mul(rot(phi), [[x1, 0.0], [0.0, x2]]), rot(-phi));
+            assert!(close(svd.along_u(x1, x2), along), "{j:?}: {:?} {along:?}", svd.along_u(x1, x2));
+            let with = mul(mul(rot(phi), [[x1, 0.0], [0.0, x2]]), rot(theta));
+            assert!(close(svd.with_values(x1, x2), with), "{j:?}: {:?} {with:?}", svd.with_values(x1, x2));
+            assert!(close(svd.with_values(svd.s1, svd.s2), j), "{j:?}");
         }
     }
 
@@ -3735,6 +3849,46 @@ mod tests {
         let ctx = Ctx { mesh: m, uv, degenerate: &degenerate, opts: &opts };
         let faces: Vec<u32> = (0..m.triangles.len() as u32).collect();
         f(&Patch::new(&ctx, &faces), &ctx)
+    }
+
+    /// A fan whose positive faces wind twice round its centre is not injective, though no
+    /// face is flipped and its boundary (a circle traced twice) crosses nowhere: only the
+    /// winding of the inner unknown's fan tells, and it counts exactly the turns the angles sum
+    /// to, whatever the ray's direction meets (a ring vertex on it, an edge along it).
+    #[test]
+    fn a_fan_winding_twice_round_its_centre_is_not_injective() {
+        let fan = |turns: u32, start: f64| {
+            let m = 12u32;
+            let mut positions = vec![[0.0f32, 0.0, 0.0]];
+            let mut coords = vec![[0.0f32, 0.0]];
+            for i in 0..m {
+                let a = std::f64::consts::TAU * i as f64 / m as f64;
+                positions.push([a.cos() as f32, a.sin() as f32, 0.2 * (i % 2) as f32]);
+                let b = start + turns as f64 * a;
+                coords.push([b.cos() as f32, b.sin() as f32]);
+            }
+            let triangles: Vec<[u32; 3]> = (0..m).map(|i| [0, 1 + i, 1 + (i + 1) % m]).collect();
+            let m =
+                TriMesh { positions, uv: Some(UvLayer { coords, triangles: triangles.clone() }), triangles };
+            whole_patch(&m, |patch, ctx| {
+                let p = patch.current(ctx).unwrap();
+                let winding: i32 = (0..patch.corners.len())
+                    .map(|t| {
+                        let c = patch.corners[t];
+                        (0..3)
+                            .filter(|&k| c[k] == 0)
+                            .map(|k| i32::from(wedge_crossing(c.map(|i| p[i as usize]), k)))
+                            .sum::<i32>()
+                    })
+                    .sum();
+                (patch.is_injective(&p), winding)
+            })
+        };
+        // Starting on the ray (a ring vertex at +x), and off it.
+        for start in [0.0, 0.1, -0.3] {
+            assert_eq!(fan(1, start), (true, 1), "{start}");
+            assert_eq!(fan(2, start), (false, 2), "{start}");
+        }
     }
 
     /// The global step refilled into a kept pattern (the scaffold kept, its rest shapes taken
