@@ -157,7 +157,6 @@ use foldhash::{HashMap, HashMapExt, HashSet, HashSetExt};
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::solvers::Solve;
-use faer::perm::PermRef;
 use faer::sparse::linalg::cholesky::{
     CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering, factorize_symbolic_cholesky,
 };
@@ -3083,17 +3082,20 @@ fn frobenius(a: [[f64; 2]; 2], b: [[f64; 2]; 2]) -> f64 {
 struct Pattern {
     matrix: SparseColMat<usize, f64>,
     /// Per triangle, the value index of each `(x, y)` pair of its 6 local unknowns (`u` of
-    /// corners 0–2, then `v`) whose system rows satisfy `row(x) ≥ row(y)`, in system numbering
-    /// (`u` of unknown `i` is row `i`, `v` row `n + i`); `usize::MAX` for the other pairs and for
-    /// a corner `≥ n`, which is a fixed point (a scaffold's box corner) with no row.
+    /// corners 0–2, then `v`) whose system rows ([`Pattern::row`]) satisfy `row(x) ≥ row(y)`;
+    /// `usize::MAX` for the other pairs and for a corner `≥ n`, which is a fixed point (a
+    /// scaffold's box corner) with no row.
     slots: Vec<[[usize; 6]; 6]>,
-    /// The value index of each diagonal entry.
+    /// The value index of each diagonal entry, by system row.
     diagonal: Vec<usize>,
     symbolic: SymbolicCholesky<usize>,
     /// The factor's values, refilled by every numeric factorisation.
     factor: Vec<f64>,
     /// Scratch space of the numeric factorisation and the solve.
     scratch: MemBuffer,
+    /// Per unknown, its place in the fill-reducing order: its `u` is system row `2 · rank`,
+    /// its `v` the next.
+    rank: Vec<usize>,
 }
 
 impl Pattern {
@@ -3103,58 +3105,53 @@ impl Pattern {
     ///
     /// Built from the unknowns' graph ([`UnknownGraph`]), not from the 36 entries of every
     /// triangle: each vertex's `u` and `v` couple with the same neighbours, so the 2n × 2n
-    /// pattern is the vertex graph's, twice over, and its columns can be written out in order.
-    /// The fill-reducing ordering is the vertex graph's AMD ordering with each vertex's `u` and
-    /// `v` kept together: the same elimination AMD finds on the whole system (the two are
-    /// indistinguishable nodes there), found on a graph with a quarter of the entries. Measured
-    /// on the horse's bake, building patterns from the triangles' entries took a third of
-    /// SLIM's CPU time, this way a quarter.
+    /// pattern is the vertex graph's with every vertex a 2 × 2 block, and its columns can be
+    /// written out in order. The fill-reducing ordering is the vertex graph's AMD ordering with
+    /// each vertex's `u` and `v` kept together: the same elimination AMD finds on the whole
+    /// system (the two are indistinguishable nodes there), found on a graph with a quarter of
+    /// the entries. Measured on the horse's bake, building patterns from the triangles' entries
+    /// took a third of SLIM's CPU time, this way a quarter.
+    ///
+    /// The system is numbered in that order already ([`Pattern::row`]), so faer factorises it
+    /// as it stands (`SymmetricOrdering::Identity`): given the ordering instead, it copied the
+    /// matrix into its permuted form before every numeric factorisation and the right-hand side
+    /// before every solve (5% of the horse's `injective` phase).
     fn new(n: usize, triangles: &[[u32; 3]]) -> Option<Pattern> {
-        let graph = UnknownGraph::new(n, triangles);
+        let graph = UnknownGraph::new(n, triangles)?;
         let (col_ptr, row_idx) = graph.system_columns();
         let matrix = SparseColMat::new(
             SymbolicSparseColMat::new_checked(2 * n, 2 * n, col_ptr, None, row_idx),
             vec![0.0; graph.system_entries()],
         );
-        let row = |c: &[u32; 3], a: usize| -> Option<usize> {
-            let v = c[a % 3] as usize;
-            (v < n).then_some((a / 3) * n + v)
-        };
-        let slots = triangles
-            .par_iter()
-            .with_min_len(FACES_PER_TASK)
-            .map(|c| {
-                let mut s = [[usize::MAX; 6]; 6];
-                for (a, slots_a) in s.iter_mut().enumerate() {
-                    for (b, slot) in slots_a.iter_mut().enumerate() {
-                        if let (Some(r), Some(col)) = (row(c, a), row(c, b))
-                            && r >= col
-                        {
-                            *slot = graph.system_slot(r, col);
-                        }
-                    }
-                }
-                s
-            })
-            .collect();
+        let slots = graph.slots(triangles);
+        let rank = graph.rank.clone();
         let diagonal = (0..2 * n).map(|i| graph.system_slot(i, i)).collect();
-        let (fwd, inv) = graph.paired_amd_ordering()?;
         let params = CholeskySymbolicParams {
             supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
             ..Default::default()
         };
-        let ordering = SymmetricOrdering::Custom(PermRef::new_checked(&fwd, &inv, 2 * n));
-        let symbolic = factorize_symbolic_cholesky(matrix.symbolic(), Side::Lower, ordering, params).ok()?;
+        // Given no ordering, faer reads the pattern as an upper triangle (whatever the side):
+        // its symbolic factorisation is given the transpose, the numeric one the lower triangle.
+        let (upper_ptr, upper_rows) = graph.upper_columns();
+        let upper = SymbolicSparseColMat::new_checked(2 * n, 2 * n, upper_ptr, None, upper_rows);
+        let symbolic =
+            factorize_symbolic_cholesky(upper.as_ref(), Side::Upper, SymmetricOrdering::Identity, params)
+                .ok()?;
         let factor = vec![0.0; symbolic.len_val()];
         let req = symbolic
             .factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default())
             .or(symbolic.solve_in_place_scratch::<f64>(1, Par::Seq));
         let scratch = MemBuffer::try_new(req).ok()?;
-        Some(Pattern { matrix, slots, diagonal, symbolic, factor, scratch })
+        Some(Pattern { matrix, slots, diagonal, symbolic, factor, scratch, rank })
     }
 
-    /// Factorises the matrix as its values stand and solves `matrix · x = rhs` in place; `None`
-    /// when the matrix is not positive definite.
+    /// The system row of unknown `v`'s `u` (`component` 0) or `v` (1).
+    fn row(&self, v: usize, component: usize) -> usize {
+        2 * self.rank[v] + component
+    }
+
+    /// Factorises the matrix as its values stand and solves `matrix · x = rhs` in place (both in
+    /// system rows); `None` when the matrix is not positive definite.
     fn solve_in_place(&mut self, rhs: &mut Mat<f64>) -> Option<()> {
         let Pattern { matrix, symbolic, factor, scratch, .. } = self;
         symbolic
@@ -3174,66 +3171,65 @@ impl Pattern {
     }
 }
 
-/// The graph of a SLIM system's unknowns: per vertex `j < n`, the vertices `< n` it shares a
-/// triangle with, itself included, sorted (`full`); fixed points (corners `≥ n`) have no node.
-/// The system's lower triangle, with `u` of vertex `r` as row `r` and `v` as row `n + r`, is in
-/// column `u_j`: `u_r` for the neighbours `r ≥ j`, then `v_r` for every neighbour; in column
-/// `v_j`: `v_r` for the neighbours `r ≥ j`. Rows come out sorted, so the columns are written
-/// directly.
+/// The graph of a SLIM system's unknowns, in its fill-reducing order: per vertex `j < n` (by
+/// rank), the vertices `< n` it shares a triangle with, itself included, sorted by rank
+/// (`full`); fixed points (corners `≥ n`) have no node. The system's lower triangle, with `u` of
+/// the vertex of rank `r` as row `2r` and its `v` as row `2r + 1`, is in column `2j` (`u_j`):
+/// rows `2r, 2r + 1` for the neighbours `r ≥ j`; in column `2j + 1` (`v_j`): row `2j + 1`, then
+/// rows `2r, 2r + 1` for the neighbours `r > j`. Rows come out sorted, so the columns are
+/// written directly.
 struct UnknownGraph {
-    /// `full[start[j]..start[j + 1]]`: vertex `j`'s neighbours.
+    /// `full[start[j]..start[j + 1]]`: the neighbours of the vertex of rank `j`, by rank.
     start: Vec<usize>,
     full: Vec<usize>,
-    /// Per vertex, where its neighbours `≥ j` begin in its slice of `full`.
+    /// Per rank, where its neighbours `≥ j` begin in its slice of `full`.
     lower: Vec<usize>,
     /// Per system column (`2n`), where it begins among the system's entries.
     col_ptr: Vec<usize>,
+    /// Per vertex (the triangles' numbering), its rank.
+    rank: Vec<usize>,
 }
 
 impl UnknownGraph {
-    fn new(n: usize, triangles: &[[u32; 3]]) -> UnknownGraph {
-        let mut pairs: Vec<u64> = (0..n as u64).map(|i| (i << 32) | i).collect();
-        for c in triangles {
-            for a in 0..3 {
-                for b in 0..3 {
-                    let (x, y) = (c[a] as u64, c[b] as u64);
-                    if a != b && (x as usize) < n && (y as usize) < n {
-                        pairs.push((x << 32) | y);
-                    }
-                }
-            }
+    /// The graph of `triangles`, ranked by the vertex graph's AMD ordering; `None` when AMD
+    /// fails.
+    fn new(n: usize, triangles: &[[u32; 3]]) -> Option<UnknownGraph> {
+        let (start, full) = vertex_graph(n, triangles);
+        // The AMD ordering of the vertex graph: `fwd[rank]` is the vertex, `rank[vertex]` its rank.
+        let graph = SymbolicSparseColMatRef::new_checked(n, n, &start, None, &full);
+        let (mut fwd, mut rank) = (vec![0usize; n], vec![0usize; n]);
+        let mut scratch = MemBuffer::try_new(amd::order_scratch::<usize>(n, full.len())).ok()?;
+        amd::order(&mut fwd, &mut rank, graph, amd::Control::default(), MemStack::new(&mut scratch)).ok()?;
+        // The same graph with every vertex replaced by its rank, neighbours sorted by rank.
+        let mut ranked_start = Vec::with_capacity(n + 1);
+        ranked_start.push(0);
+        let mut ranked = Vec::with_capacity(full.len());
+        for &v in &fwd {
+            let at = ranked.len();
+            ranked.extend(full[start[v]..start[v + 1]].iter().map(|&w| rank[w]));
+            ranked[at..].sort_unstable();
+            ranked_start.push(ranked.len());
         }
-        pairs.par_sort_unstable();
-        pairs.dedup();
-        let mut start = vec![0usize; n + 1];
-        for &p in &pairs {
-            start[(p >> 32) as usize + 1] += 1;
-        }
-        for j in 0..n {
-            start[j + 1] += start[j];
-        }
-        let full: Vec<usize> = pairs.iter().map(|&p| (p & 0xffff_ffff) as usize).collect();
+        let (start, full) = (ranked_start, ranked);
         let lower: Vec<usize> =
             (0..n).map(|j| full[start[j]..start[j + 1]].partition_point(|&r| r < j)).collect();
         let mut col_ptr = Vec::with_capacity(2 * n + 1);
         col_ptr.push(0);
         for j in 0..n {
-            let len = start[j + 1] - start[j];
-            col_ptr.push(col_ptr[j] + (len - lower[j]) + len);
+            let below = 2 * (start[j + 1] - start[j] - lower[j]);
+            col_ptr.push(col_ptr[2 * j] + below);
+            col_ptr.push(col_ptr[2 * j + 1] + below - 1);
         }
-        for j in 0..n {
-            let len = start[j + 1] - start[j];
-            col_ptr.push(col_ptr[n + j] + (len - lower[j]));
-        }
-        UnknownGraph { start, full, lower, col_ptr }
+        Some(UnknownGraph { start, full, lower, col_ptr, rank })
     }
 
     fn n(&self) -> usize {
         self.lower.len()
     }
 
-    fn neighbours(&self, j: usize) -> &[usize] {
-        &self.full[self.start[j]..self.start[j + 1]]
+    /// The neighbours `≥ j` of rank `j`, by rank (the first is `j` itself).
+    fn below(&self, j: usize) -> &[usize] {
+        &self.full[self.start[j] + self.lower[j]..self.start[j + 1]]
     }
 
     fn system_entries(&self) -> usize {
@@ -3245,45 +3241,130 @@ impl UnknownGraph {
         let n = self.n();
         let mut rows = Vec::with_capacity(self.system_entries());
         for j in 0..n {
-            let nb = self.neighbours(j);
-            rows.extend_from_slice(&nb[self.lower[j]..]);
-            rows.extend(nb.iter().map(|&r| n + r));
-        }
-        for j in 0..n {
-            rows.extend(self.neighbours(j)[self.lower[j]..].iter().map(|&r| n + r));
+            let below = self.below(j);
+            rows.extend(below.iter().flat_map(|&r| [2 * r, 2 * r + 1]));
+            rows.extend(below.iter().flat_map(|&r| [2 * r, 2 * r + 1]).skip(1));
         }
         (self.col_ptr.clone(), rows)
     }
 
-    /// The value index of system entry `(r, col)`, `r ≥ col`, which must be in the pattern.
-    fn system_slot(&self, r: usize, col: usize) -> usize {
+    /// The column pointers and row indices of the system's upper triangle (the transpose of
+    /// [`UnknownGraph::system_columns`]'): in column `2j`, rows `2r, 2r + 1` for the neighbours
+    /// `r < j`, then `2j`; in column `2j + 1`, the same and `2j + 1`.
+    fn upper_columns(&self) -> (Vec<usize>, Vec<usize>) {
         let n = self.n();
-        let (j, v_column) = if col < n { (col, false) } else { (col - n, true) };
-        let nb = self.neighbours(j);
-        let at = |v: usize| nb.binary_search(&v).expect("entry in the pattern");
-        self.col_ptr[col]
-            + match (v_column, r < n) {
-                (false, true) => at(r) - self.lower[j],
-                (false, false) => (nb.len() - self.lower[j]) + at(r - n),
-                (true, _) => at(r - n) - self.lower[j],
+        let mut col_ptr = Vec::with_capacity(2 * n + 1);
+        let mut rows = Vec::with_capacity(self.system_entries());
+        col_ptr.push(0);
+        for j in 0..n {
+            let above = &self.full[self.start[j]..self.start[j] + self.lower[j]];
+            for last in [2 * j, 2 * j + 1] {
+                rows.extend(above.iter().flat_map(|&r| [2 * r, 2 * r + 1]));
+                rows.extend(2 * j..=last);
+                col_ptr.push(rows.len());
             }
+        }
+        (col_ptr, rows)
     }
 
-    /// The system's ordering (forward and inverse): the vertex graph's AMD ordering with each
-    /// vertex's `u` and `v` next to each other. `None` when AMD fails.
-    fn paired_amd_ordering(&self) -> Option<(Vec<usize>, Vec<usize>)> {
+    /// Per triangle, the value index of each `(x, y)` pair of its local unknowns ([`Pattern`]'s
+    /// `slots`): one search per pair of corners, whose four entries lie side by side.
+    fn slots(&self, triangles: &[[u32; 3]]) -> Vec<[[usize; 6]; 6]> {
         let n = self.n();
-        let graph = SymbolicSparseColMatRef::new_checked(n, n, &self.start, None, &self.full);
-        let (mut fwd, mut inv) = (vec![0usize; n], vec![0usize; n]);
-        let mut scratch = MemBuffer::try_new(amd::order_scratch::<usize>(n, self.full.len())).ok()?;
-        amd::order(&mut fwd, &mut inv, graph, amd::Control::default(), MemStack::new(&mut scratch)).ok()?;
-        let fwd2: Vec<usize> = fwd.iter().flat_map(|&v| [v, n + v]).collect();
-        let mut inv2 = vec![0usize; 2 * n];
-        for (i, &v) in fwd2.iter().enumerate() {
-            inv2[v] = i;
-        }
-        Some((fwd2, inv2))
+        triangles
+            .par_iter()
+            .with_min_len(FACES_PER_TASK)
+            .map(|c| {
+                let mut s = [[usize::MAX; 6]; 6];
+                for a in 0..3 {
+                    for b in 0..3 {
+                        let (va, vb) = (c[a] as usize, c[b] as usize);
+                        if va >= n || vb >= n || self.rank[va] < self.rank[vb] {
+                            continue;
+                        }
+                        let (k, j) = (self.rank[va], self.rank[vb]);
+                        let at = self.below(j).binary_search(&k).expect("entry in the pattern");
+                        for ca in 0..2 {
+                            for cb in 0..2 {
+                                let (r, col) = (2 * k + ca, 2 * j + cb);
+                                if r >= col {
+                                    s[3 * ca + a][3 * cb + b] = self.col_ptr[col] + 2 * at + ca - cb;
+                                }
+                            }
+                        }
+                    }
+                }
+                s
+            })
+            .collect()
     }
+
+    /// The value index of system entry `(r, col)`, `r ≥ col`, which must be in the pattern.
+    fn system_slot(&self, r: usize, col: usize) -> usize {
+        let j = col / 2;
+        let at = self.below(j).binary_search(&(r / 2)).expect("entry in the pattern");
+        // Column `2j + 1` lacks the first column's row `2j`.
+        self.col_ptr[col] + 2 * at + r % 2 - col % 2
+    }
+}
+
+/// The adjacency of the unknowns `< n` that `triangles` join, each vertex its own neighbour, as
+/// compressed sorted lists (`full[start[v]..start[v + 1]]`). Bucketed by vertex, then each
+/// short list sorted on its own: sorting all the pairs at once took a fifth of building a
+/// pattern.
+fn vertex_graph(n: usize, triangles: &[[u32; 3]]) -> (Vec<usize>, Vec<usize>) {
+    let inner = |c: &[u32; 3]| c.map(|v| (v as usize) < n);
+    let mut start = vec![0usize; n + 1];
+    for c in triangles {
+        let inside = inner(c);
+        let others = inside.iter().filter(|&&i| i).count().saturating_sub(1);
+        for a in 0..3 {
+            if inside[a] {
+                start[c[a] as usize + 1] += others;
+            }
+        }
+    }
+    for v in 0..n {
+        start[v + 1] += start[v] + 1;
+    }
+    let mut next: Vec<usize> = start[..n].to_vec();
+    let mut full = vec![0usize; start[n]];
+    for v in 0..n {
+        full[next[v]] = v;
+        next[v] += 1;
+    }
+    for c in triangles {
+        let inside = inner(c);
+        for a in 0..3 {
+            for b in 0..3 {
+                if a != b && inside[a] && inside[b] {
+                    let x = c[a] as usize;
+                    full[next[x]] = c[b] as usize;
+                    next[x] += 1;
+                }
+            }
+        }
+    }
+    // Sorted and without repeats, moved down over the repeats removed before it.
+    let mut kept = 0;
+    let mut from = 0;
+    for v in 0..n {
+        let end = start[v + 1];
+        full[from..end].sort_unstable();
+        start[v] = kept;
+        let mut last = usize::MAX;
+        for i in from..end {
+            if full[i] != last {
+                last = full[i];
+                full[kept] = last;
+                kept += 1;
+            }
+        }
+        from = end;
+    }
+    start[n] = kept;
+    full.truncate(kept);
+    (start, full)
 }
 
 /// The SLIM global step's system: the island's pattern (fixed for the whole run, built when first
@@ -3348,12 +3429,10 @@ impl SlimSystem {
         self.unglued(&x)
     }
 
-    /// The positions of a solved system (`u` then `v` in one column), every unknown at the
-    /// position of the one it is glued to; `None` when not finite.
-    fn unglued(&self, x: &Mat<f64>) -> Option<Vec<[f64; 2]>> {
-        let n = self.glue.len();
-        let q: Vec<[f64; 2]> =
-            self.glue.iter().map(|&g| [x[(g as usize, 0)], x[(n + g as usize, 0)]]).collect();
+    /// The positions of a solved system (per unknown), every unknown at the position of the
+    /// one it is glued to; `None` when not finite.
+    fn unglued(&self, x: &[[f64; 2]]) -> Option<Vec<[f64; 2]>> {
+        let q: Vec<[f64; 2]> = self.glue.iter().map(|&g| x[g as usize]).collect();
         q.iter().flatten().all(|v| v.is_finite()).then_some(q)
     }
 }
@@ -3376,30 +3455,33 @@ fn solve<'r>(
     p: &[[f64; 2]],
     triangles: impl Iterator<Item = ([u32; 3], &'r Rest)>,
     fixed: &[[f64; 2]],
-) -> Option<Mat<f64>> {
+) -> Option<Vec<[f64; 2]>> {
     let pos = |v: u32| if (v as usize) < n { p[v as usize] } else { fixed[v as usize - n] };
     let mut rhs = Mat::<f64>::zeros(2 * n, 1);
-    let vals = pattern.matrix.val_mut();
-    vals.iter_mut().for_each(|v| *v = 0.0);
-    let triangles: Vec<([u32; 3], &Rest)> = triangles.collect();
-    let mut faces = Vec::with_capacity(ASSEMBLY_BLOCK.min(triangles.len()));
-    for (block, slots) in triangles.chunks(ASSEMBLY_BLOCK).zip(pattern.slots.chunks(ASSEMBLY_BLOCK)) {
-        block
-            .par_iter()
-            .with_min_len(FACES_PER_TASK)
-            .map(|&(verts, rest)| slim_terms(rest, verts.map(pos), rest.terms(terms)))
-            .collect_into_vec(&mut faces);
-        assemble(block, slots, &faces, n, fixed, &mut rhs, vals)?;
-    }
-    for (i, q) in p.iter().enumerate() {
-        rhs[(i, 0)] += proximal * q[0];
-        rhs[(n + i, 0)] += proximal * q[1];
-    }
-    for &d in &pattern.diagonal {
-        vals[d] += proximal;
+    {
+        let Pattern { matrix, slots, diagonal, rank, .. } = &mut *pattern;
+        let vals = matrix.val_mut();
+        vals.iter_mut().for_each(|v| *v = 0.0);
+        let triangles: Vec<([u32; 3], &Rest)> = triangles.collect();
+        let mut faces = Vec::with_capacity(ASSEMBLY_BLOCK.min(triangles.len()));
+        for (block, slots) in triangles.chunks(ASSEMBLY_BLOCK).zip(slots.chunks(ASSEMBLY_BLOCK)) {
+            block
+                .par_iter()
+                .with_min_len(FACES_PER_TASK)
+                .map(|&(verts, rest)| slim_terms(rest, verts.map(pos), rest.terms(terms)))
+                .collect_into_vec(&mut faces);
+            assemble(block, slots, &faces, rank, fixed, &mut rhs, vals)?;
+        }
+        for (i, q) in p.iter().enumerate() {
+            rhs[(2 * rank[i], 0)] += proximal * q[0];
+            rhs[(2 * rank[i] + 1, 0)] += proximal * q[1];
+        }
+        for &d in diagonal.iter() {
+            vals[d] += proximal;
+        }
     }
     pattern.solve_in_place(&mut rhs)?;
-    Some(rhs)
+    Some((0..n).map(|i| [rhs[(pattern.row(i, 0), 0)], rhs[(pattern.row(i, 1), 0)]]).collect())
 }
 
 /// Triangles whose SLIM terms [`solve`] computes (in parallel) before adding them into the
@@ -3408,17 +3490,19 @@ fn solve<'r>(
 const ASSEMBLY_BLOCK: usize = 8 * FACES_PER_TASK;
 
 /// Adds the terms `faces` of the triangles `block` (each with its `slots`, a corner `n + k` the
-/// fixed point `fixed[k]`) into the system's values and right-hand side, in order; `None` at
+/// fixed point `fixed[k]`, `n` the unknowns `rank` orders) into the system's values and
+/// right-hand side (rows of [`Pattern::row`]), in order; `None` at
 /// the first triangle whose terms are not finite.
 fn assemble(
     block: &[([u32; 3], &Rest)],
     slots: &[[[usize; 6]; 6]],
     faces: &[Option<FaceRows>],
-    n: usize,
+    rank: &[usize],
     fixed: &[[f64; 2]],
     rhs: &mut Mat<f64>,
     vals: &mut [f64],
 ) -> Option<()> {
+    let n = rank.len();
     for (((verts, rest), slots), face) in block.iter().zip(slots).zip(faces) {
         let face = face.as_ref()?;
         for (a, target) in face.iter() {
@@ -3431,7 +3515,7 @@ fn assemble(
                 if vx >= n {
                     continue;
                 }
-                rhs[((x / 3) * n + vx, 0)] += rest.weight * a[x] * (target - fixed_part);
+                rhs[(2 * rank[vx] + x / 3, 0)] += rest.weight * a[x] * (target - fixed_part);
                 for y in 0..6 {
                     let slot = slots[x][y];
                     if slot != usize::MAX {
@@ -3530,37 +3614,75 @@ mod tests {
     }
 
     /// The system pattern written out from the unknowns' graph is the one the triangles'
-    /// entries make (summed like faer's triplet assembly), fixed points and an isolated unknown
-    /// included, and the paired ordering fills the factor about as little as AMD on the whole
-    /// system does (a wrong ordering convention would fill it several times over).
+    /// entries make (summed like faer's triplet assembly) in the pattern's own numbering
+    /// ([`Pattern::row`]: each unknown's `u` and `v` side by side), fixed points and an
+    /// isolated unknown included; that numbering fills the factor about as little as AMD on
+    /// the whole system does (a wrong ordering convention would fill it several times over);
+    /// and solved through it, the system gives what a plain Cholesky of the same entries in
+    /// the triangles' numbering gives.
     #[test]
     fn the_system_pattern_is_the_triangles_entries_and_its_ordering_is_amds() {
         let mesh = grid(12, |p| [p[0], p[1]]);
         let n = mesh.positions.len() + 1; // the last unknown is in no triangle
         let mut triangles: Vec<[u32; 3]> = mesh.triangles.clone();
         triangles.push([0, n as u32, n as u32 + 1]); // a scaffold triangle to two fixed points
-        // The diagonal, and each vertex's own u–v entry (a structural zero for the unknown in
-        // no triangle).
-        let mut triplets: Vec<Triplet<usize, usize, f64>> =
-            (0..2 * n).map(|i| Triplet::new(i, i, 1.0)).collect();
-        triplets.extend((0..n).map(|i| Triplet::new(n + i, i, 1.0)));
+        let mut pattern = Pattern::new(n, &triangles).unwrap();
+        let mut ranks: Vec<usize> = (0..n).map(|v| pattern.row(v, 0)).collect();
+        ranks.sort_unstable();
+        assert_eq!(ranks, (0..n).map(|r| 2 * r).collect::<Vec<_>>(), "every unknown a pair of rows");
+        // The entries each (row, column) pair of unknowns gets, in the triangles' numbering
+        // (`u` of unknown `i` row `i`, `v` row `n + i`) and in the pattern's.
+        let value = |a: usize, b: usize| {
+            let (lo, hi) = (a.min(b), a.max(b));
+            if lo == hi { 40.0 + (lo % 7) as f64 } else { -1.0 - ((hi + 3 * lo) % 5) as f64 * 0.1 }
+        };
+        let mut pairs: Vec<(usize, usize)> = (0..2 * n).map(|i| (i, i)).collect();
+        pairs.extend((0..n).map(|i| (n + i, i)));
         for c in &triangles {
             for a in 0..6 {
                 for b in 0..6 {
                     let (va, vb) = (c[a % 3] as usize, c[b % 3] as usize);
-                    let (r, col) = ((a / 3) * n + va, (b / 3) * n + vb);
-                    if va < n && vb < n && r >= col {
-                        triplets.push(Triplet::new(r, col, 1.0));
+                    if va < n && vb < n {
+                        pairs.push(((a / 3) * n + va, (b / 3) * n + vb));
                     }
                 }
             }
         }
+        pairs.retain(|&(r, col)| r >= col);
+        pairs.sort_unstable();
+        pairs.dedup();
+        let rows: Vec<usize> = (0..2 * n).map(|x| pattern.row(x % n, x / n)).collect();
+        let ours = |x: usize| rows[x];
+        let triplets: Vec<Triplet<usize, usize, f64>> = pairs
+            .iter()
+            .map(|&(r, col)| {
+                let (a, b) = (ours(r), ours(col));
+                Triplet::new(a.max(b), a.min(b), 1.0)
+            })
+            .collect();
         let reference = SparseColMat::<usize, f64>::try_new_from_triplets(2 * n, 2 * n, &triplets).unwrap();
-        let pattern = Pattern::new(n, &triangles).unwrap();
         assert_eq!(pattern.matrix.symbolic().col_ptr(), reference.symbolic().col_ptr());
         assert_eq!(pattern.matrix.symbolic().row_idx(), reference.symbolic().row_idx());
         for (i, &d) in pattern.diagonal.iter().enumerate() {
             assert_eq!(pattern.matrix.symbolic().row_idx()[d], i);
+        }
+        for c in &triangles {
+            for a in 0..6 {
+                for b in 0..6 {
+                    let (va, vb) = (c[a % 3] as usize, c[b % 3] as usize);
+                    if va < n && vb < n && ours((a / 3) * n + va) >= ours((b / 3) * n + vb) {
+                        let slot =
+                            pattern.slots.iter().zip(&triangles).find(|(_, t)| *t == c).unwrap().0[a][b];
+                        let col =
+                            (0..2 * n).find(|&j| pattern.matrix.symbolic().col_ptr()[j + 1] > slot).unwrap();
+                        assert_eq!(
+                            (pattern.matrix.symbolic().row_idx()[slot], col),
+                            (ours((a / 3) * n + va), ours((b / 3) * n + vb)),
+                            "slot of {c:?} ({a}, {b})"
+                        );
+                    }
+                }
+            }
         }
         let params = CholeskySymbolicParams {
             supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
@@ -3570,8 +3692,32 @@ mod tests {
             factorize_symbolic_cholesky(reference.symbolic(), Side::Lower, SymmetricOrdering::Amd, params)
                 .unwrap()
                 .len_val();
-        let ours = pattern.symbolic.len_val();
-        assert!((ours as f64) < 1.25 * amd as f64, "paired ordering fills {ours} entries, AMD {amd}");
+        let fill = pattern.symbolic.len_val();
+        assert!((fill as f64) < 1.25 * amd as f64, "the pattern's order fills {fill} entries, AMD {amd}");
+        // Solved in the pattern's numbering and in the triangles' by a plain Cholesky.
+        let col_ptr = pattern.matrix.symbolic().col_ptr().to_vec();
+        let row_idx = pattern.matrix.symbolic().row_idx().to_vec();
+        let mut plain_triplets = Vec::new();
+        let vals = pattern.matrix.val_mut();
+        for &(r, col) in &pairs {
+            let (a, b) = (ours(r), ours(col));
+            let (hi, lo) = (a.max(b), a.min(b));
+            let k = (col_ptr[lo]..col_ptr[lo + 1]).find(|&k| row_idx[k] == hi).unwrap();
+            vals[k] = value(r, col);
+            plain_triplets.push(Triplet::new(r, col, value(r, col)));
+        }
+        let b = |x: usize| 1.0 + (x % 11) as f64;
+        let mut ours_rhs = Mat::<f64>::zeros(2 * n, 1);
+        let mut plain = Mat::<f64>::zeros(2 * n, 1);
+        for x in 0..2 * n {
+            ours_rhs[(ours(x), 0)] = b(x);
+            plain[(x, 0)] = b(x);
+        }
+        pattern.solve_in_place(&mut ours_rhs).unwrap();
+        solve_lower(2 * n, &plain_triplets, &mut plain).unwrap();
+        for x in 0..2 * n {
+            assert!((ours_rhs[(ours(x), 0)] - plain[(x, 0)]).abs() < 1e-12, "unknown row {x}");
+        }
     }
 
     #[test]
