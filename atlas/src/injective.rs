@@ -127,7 +127,8 @@
 //!   face) starts exactly one boundary edge, one boundary loop, and `V − E + F = 1`.
 //! - **Injective check** (on `f64` working positions): every face has positive signed area; the
 //!   angles of the faces round every interior vertex sum to 2π (not 4π: a vertex whose fan wraps
-//!   twice), and those round a boundary point (every unknown at that position) to at most 2π
+//!   twice; counted exactly as the fan's winding, `wedge_crossing`), and those round a boundary
+//!   point (every unknown at that position) to at most 2π
 //!   (plus [`BOUNDARY_TURN_SLACK`]); no two boundary segments that share no endpoint cross
 //!   properly (touching, as the two sides of a closed slit do, covers no area twice and is
 //!   allowed); and exactly one boundary loop is counter-clockwise with more than a
@@ -3468,9 +3469,12 @@ fn solve<'r>(
             block
                 .par_iter()
                 .with_min_len(FACES_PER_TASK)
-                .map(|&(verts, rest)| slim_terms(rest, verts.map(pos), rest.terms(terms)))
+                .map(|&(verts, rest)| {
+                    let rows = slim_terms(rest, verts.map(pos), rest.terms(terms))?;
+                    Some(rows.system(rest.weight, verts, n, fixed))
+                })
                 .collect_into_vec(&mut faces);
-            assemble(block, slots, &faces, rank, fixed, &mut rhs, vals)?;
+            assemble(block, slots, &faces, rank, &mut rhs, vals)?;
         }
         for (i, q) in p.iter().enumerate() {
             rhs[(2 * rank[i], 0)] += proximal * q[0];
@@ -3489,38 +3493,64 @@ fn solve<'r>(
 /// bytes a face.
 const ASSEMBLY_BLOCK: usize = 8 * FACES_PER_TASK;
 
-/// Adds the terms `faces` of the triangles `block` (each with its `slots`, a corner `n + k` the
-/// fixed point `fixed[k]`, `n` the unknowns `rank` orders) into the system's values and
-/// right-hand side (rows of [`Pattern::row`]), in order; `None` at
-/// the first triangle whose terms are not finite.
-fn assemble(
-    block: &[([u32; 3], &Rest)],
-    slots: &[[[usize; 6]; 6]],
-    faces: &[Option<FaceRows>],
-    rank: &[usize],
-    fixed: &[[f64; 2]],
-    rhs: &mut Mat<f64>,
-    vals: &mut [f64],
-) -> Option<()> {
-    let n = rank.len();
-    for (((verts, rest), slots), face) in block.iter().zip(slots).zip(faces) {
-        let face = face.as_ref()?;
-        for (a, target) in face.iter() {
+/// One face's share of SLIM's global step: the 6 × 6 block `weight · Σ a aᵀ` of its rows over
+/// its local unknowns (`u` of corners 0–2, then `v`), and its part of the right-hand side,
+/// `weight · Σ a (target − a · fixed)` (the fixed points' terms moved across). Summed per face
+/// where the terms are computed, in parallel, so that what [`assemble`] adds in order, on one
+/// thread, is one value per entry instead of one per row and entry (the assembly was a fifth
+/// of the islands' solves' instructions, all of it sequential).
+struct FaceSystem {
+    block: [[f64; 6]; 6],
+    rhs: [f64; 6],
+}
+
+impl FaceRows {
+    /// This face's [`FaceSystem`] with `weight`, its corners `verts` (a corner `n + k` the fixed
+    /// point `fixed[k]`).
+    fn system(&self, weight: f64, verts: [u32; 3], n: usize, fixed: &[[f64; 2]]) -> FaceSystem {
+        let mut out = FaceSystem { block: [[0.0; 6]; 6], rhs: [0.0; 6] };
+        for (a, target) in self.iter() {
             let fixed_part: f64 = (0..6)
                 .filter(|&y| verts[y % 3] as usize >= n)
                 .map(|y| a[y] * fixed[verts[y % 3] as usize - n][y / 3])
                 .sum();
             for x in 0..6 {
-                let vx = verts[x % 3] as usize;
-                if vx >= n {
-                    continue;
-                }
-                rhs[(2 * rank[vx] + x / 3, 0)] += rest.weight * a[x] * (target - fixed_part);
+                let wa = weight * a[x];
+                out.rhs[x] += wa * (target - fixed_part);
                 for y in 0..6 {
-                    let slot = slots[x][y];
-                    if slot != usize::MAX {
-                        vals[slot] += rest.weight * a[x] * a[y];
-                    }
+                    out.block[x][y] += wa * a[y];
+                }
+            }
+        }
+        out
+    }
+}
+
+/// Adds the systems `faces` of the triangles `block` (each with its `slots`; a corner `≥ n`, `n`
+/// the unknowns `rank` orders, is a fixed point with no row) into the system's values and
+/// right-hand side (rows of [`Pattern::row`]), in order; `None` at the first triangle whose
+/// terms are not finite.
+fn assemble(
+    block: &[([u32; 3], &Rest)],
+    slots: &[[[usize; 6]; 6]],
+    faces: &[Option<FaceSystem>],
+    rank: &[usize],
+    rhs: &mut Mat<f64>,
+    vals: &mut [f64],
+) -> Option<()> {
+    let n = rank.len();
+    for (((verts, _), slots), face) in block.iter().zip(slots).zip(faces) {
+        let face = face.as_ref()?;
+        for x in 0..6 {
+            let vx = verts[x % 3] as usize;
+            if vx >= n {
+                continue;
+            }
+            rhs[(2 * rank[vx] + x / 3, 0)] += face.rhs[x];
+            for y in 0..6 {
+                let slot = slots[x][y];
+                if slot != usize::MAX {
+                    vals[slot] += face.block[x][y];
                 }
             }
         }
@@ -3887,6 +3917,21 @@ mod tests {
                         (proxy - numeric).abs() < 1e-5 * (1.0 + numeric.abs()),
                         "{lambda:?}, {q:?}, unknown {x}: proxy {proxy} energy {numeric}"
                     );
+                    // The face's system, `2 (K z − b)`, has that gradient too: with every corner
+                    // an unknown, and with corner 2 a fixed point (its terms moved across).
+                    for (verts, n) in [([0, 1, 2], 3), ([0, 1, 2], 2)] {
+                        if verts[x % 3] as usize >= n {
+                            continue;
+                        }
+                        let system = face.system(1.0, verts, n, &[q[2]]);
+                        let free = |y: usize| (verts[y % 3] as usize) < n;
+                        let kz: f64 = (0..6).filter(|&y| free(y)).map(|y| system.block[x][y] * z[y]).sum();
+                        let gradient = 2.0 * (kz - system.rhs[x]);
+                        assert!(
+                            (gradient - numeric).abs() < 1e-5 * (1.0 + numeric.abs()),
+                            "{lambda:?}, {q:?}, unknown {x} of {verts:?}: system {gradient} energy {numeric}"
+                        );
+                    }
                 }
             }
         }
