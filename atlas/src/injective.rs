@@ -3125,8 +3125,8 @@ impl Pattern {
             vec![0.0; graph.system_entries()],
         );
         let slots = graph.slots(triangles);
-        let rank = graph.rank.clone();
-        let diagonal = (0..2 * n).map(|i| graph.system_slot(i, i)).collect();
+        // Every column's first entry is its diagonal (type docs of `UnknownGraph`).
+        let diagonal = graph.col_ptr[..2 * n].to_vec();
         let params = CholeskySymbolicParams {
             supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
             ..Default::default()
@@ -3143,7 +3143,7 @@ impl Pattern {
             .factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default())
             .or(symbolic.solve_in_place_scratch::<f64>(1, Par::Seq));
         let scratch = MemBuffer::try_new(req).ok()?;
-        Some(Pattern { matrix, slots, diagonal, symbolic, factor, scratch, rank })
+        Some(Pattern { matrix, slots, diagonal, symbolic, factor, scratch, rank: graph.rank })
     }
 
     /// The system row of unknown `v`'s `u` (`component` 0) or `v` (1).
@@ -3250,7 +3250,7 @@ impl UnknownGraph {
     }
 
     /// The column pointers and row indices of the system's upper triangle (the transpose of
-    /// [`UnknownGraph::system_columns`]'): in column `2j`, rows `2r, 2r + 1` for the neighbours
+    /// [`UnknownGraph::system_columns`]): in column `2j`, rows `2r, 2r + 1` for the neighbours
     /// `r < j`, then `2j`; in column `2j + 1`, the same and `2j + 1`.
     fn upper_columns(&self) -> (Vec<usize>, Vec<usize>) {
         let n = self.n();
@@ -3298,14 +3298,6 @@ impl UnknownGraph {
                 s
             })
             .collect()
-    }
-
-    /// The value index of system entry `(r, col)`, `r ≥ col`, which must be in the pattern.
-    fn system_slot(&self, r: usize, col: usize) -> usize {
-        let j = col / 2;
-        let at = self.below(j).binary_search(&(r / 2)).expect("entry in the pattern");
-        // Column `2j + 1` lacks the first column's row `2j`.
-        self.col_ptr[col] + 2 * at + r % 2 - col % 2
     }
 }
 
