@@ -3506,11 +3506,11 @@ impl FaceRows {
                 .filter(|&y| verts[y % 3] as usize >= n)
                 .map(|y| a[y] * fixed[verts[y % 3] as usize - n][y / 3])
                 .sum();
-            for x in 0..6 {
-                let wa = weight * a[x];
-                out.rhs[x] += wa * (target - fixed_part);
-                for y in 0..6 {
-                    out.block[x][y] += wa * a[y];
+            for ((row, rhs), &ax) in out.block.iter_mut().zip(&mut out.rhs).zip(a) {
+                let wa = weight * ax;
+                *rhs += wa * (target - fixed_part);
+                for (entry, &ay) in row.iter_mut().zip(a) {
+                    *entry += wa * ay;
                 }
             }
         }
@@ -3539,10 +3539,9 @@ fn assemble(
                 continue;
             }
             rhs[(2 * rank[vx] + x / 3, 0)] += face.rhs[x];
-            for y in 0..6 {
-                let slot = slots[x][y];
+            for (&slot, &value) in slots[x].iter().zip(&face.block[x]) {
                 if slot != usize::MAX {
-                    vals[slot] += face.block[x][y];
+                    vals[slot] += value;
                 }
             }
         }
