@@ -193,14 +193,13 @@ pub fn image_metrics(
     params.check()?;
     let uv = require_uv(mesh)?;
     let faces = face_distortion(mesh, uv);
-    let mut per_view = Vec::with_capacity(cameras.len());
-    for cam in cameras {
-        let g = render(mesh, cam)?;
-        if let Some(s) = view_scores(uv, &faces, None, &g, params) {
-            per_view.push(s);
-        }
-    }
-    summarize_views(per_view, cameras.len())
+    // The views are rendered and scored side by side (each also in parallel inside); their
+    // scores come back in camera order, so the means are the same bits as one by one.
+    let per_view: Vec<Option<ViewScores>> = cameras
+        .par_iter()
+        .map(|cam| Ok(view_scores(uv, &faces, None, &render(mesh, cam)?, params)))
+        .collect::<Result<_, AtlasError>>()?;
+    summarize_views(per_view.into_iter().flatten().collect(), cameras.len())
 }
 
 /// The Editability that each of `layouts` (UV layers of one mesh: the same positions and faces)
@@ -231,14 +230,23 @@ pub fn unpacked_editability(
             Ok((uv, face_distortion(m, uv), uv_charts(m, uv).0))
         })
         .collect::<Result<_, _>>()?;
-    let mut per_view: Vec<Vec<ViewScores>> = vec![Vec::with_capacity(cameras.len()); layouts.len()];
-    for cam in cameras {
-        let g = render(mesh, cam)?;
-        for ((uv, faces, islands), views) in scored.iter().zip(&mut per_view) {
-            views.extend(view_scores(uv, faces, Some(islands), &g, params));
-        }
-    }
-    per_view.into_iter().map(|v| Ok(summarize_views(v, cameras.len())?.editability)).collect()
+    // Per camera (in parallel, back in camera order), each layout's scores of its one rendering.
+    let by_view: Vec<Vec<Option<ViewScores>>> = cameras
+        .par_iter()
+        .map(|cam| {
+            let g = render(mesh, cam)?;
+            Ok(scored
+                .iter()
+                .map(|(uv, faces, islands)| view_scores(uv, faces, Some(islands), &g, params))
+                .collect())
+        })
+        .collect::<Result<_, AtlasError>>()?;
+    (0..layouts.len())
+        .map(|l| {
+            let views: Vec<ViewScores> = by_view.iter().filter_map(|v| v[l].clone()).collect();
+            Ok(summarize_views(views, cameras.len())?.editability)
+        })
+        .collect()
 }
 
 /// The means over the measured views (module docs), or [`AtlasError::NothingVisible`].
