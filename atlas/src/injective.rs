@@ -3148,7 +3148,7 @@ impl Pattern {
 
     /// The system row of unknown `v`'s `u` (`component` 0) or `v` (1).
     fn row(&self, v: usize, component: usize) -> usize {
-        2 * self.rank[v] + component
+        system_row(&self.rank, v, component)
     }
 
     /// Factorises the matrix as its values stand and solves `matrix · x = rhs` in place (both in
@@ -3299,6 +3299,12 @@ impl UnknownGraph {
             })
             .collect()
     }
+}
+
+/// The system row of unknown `v`'s `u` (`component` 0) or `v` (1), `rank` the unknowns' places
+/// in the fill-reducing order ([`Pattern::row`], for where the pattern is borrowed in parts).
+fn system_row(rank: &[usize], v: usize, component: usize) -> usize {
+    2 * rank[v] + component
 }
 
 /// The adjacency of the unknowns `< n` that `triangles` join, each vertex its own neighbour, as
@@ -3469,8 +3475,8 @@ fn solve<'r>(
             assemble(block, slots, &faces, rank, &mut rhs, vals)?;
         }
         for (i, q) in p.iter().enumerate() {
-            rhs[(2 * rank[i], 0)] += proximal * q[0];
-            rhs[(2 * rank[i] + 1, 0)] += proximal * q[1];
+            rhs[(system_row(rank, i, 0), 0)] += proximal * q[0];
+            rhs[(system_row(rank, i, 1), 0)] += proximal * q[1];
         }
         for &d in diagonal.iter() {
             vals[d] += proximal;
@@ -3538,7 +3544,7 @@ fn assemble(
             if vx >= n {
                 continue;
             }
-            rhs[(2 * rank[vx] + x / 3, 0)] += face.rhs[x];
+            rhs[(system_row(rank, vx, x / 3), 0)] += face.rhs[x];
             for (&slot, &value) in slots[x].iter().zip(&face.block[x]) {
                 if slot != usize::MAX {
                     vals[slot] += value;
