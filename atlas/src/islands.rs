@@ -683,9 +683,9 @@ fn least_shear_rotation(terms: &ShearTerms, fallback: [f64; 2]) -> [f64; 2] {
     };
     let f = |deg: f64| terms.mean(at(deg));
     let step = 0.5;
-    // The grid's angles in parallel (each sum over the faces is still taken in order, so the
-    // values and the choice, the first lowest, are those of a sequential scan): one large
-    // island's turn was the tail of the islands' parallel loop.
+    // The grid's angles in parallel (each angle's sum over the faces is taken alone in its fixed
+    // order, so the values and the choice, the first lowest, are those of a sequential scan):
+    // one large island's turn was the tail of the islands' parallel loop.
     let grid: Vec<f64> = if terms.len() >= PAR_SHEAR_FACES {
         (0..180).into_par_iter().map(|k| f(k as f64 * step)).collect()
     } else {

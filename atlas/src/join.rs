@@ -144,7 +144,7 @@ pub fn join_small_islands(mesh: &TriMesh, opts: &JoinOptions) -> Result<Joined, 
         area3,
         coords: uv.coords.iter().map(|p| p.map(f64::from)).collect(),
         tris: uv.triangles.clone(),
-        sums: vec![None; islands.len()],
+        kept: vec![None; islands.len()],
         members: islands,
         label,
     };
@@ -236,8 +236,8 @@ struct Work<'a> {
     tris: Vec<[u32; 3]>,
     members: Vec<Vec<u32>>,
     label: Vec<u32>,
-    /// Per island, what every try against it reads of it, until the island changes.
-    sums: Vec<Option<NeighbourSums>>,
+    /// Per island, what every try against it reads of it (kept once a try asked).
+    kept: Vec<Option<NeighbourValues>>,
 }
 
 /// What [`Work::try_join`] reads of the neighbour island, kept between tries: thousands of small
@@ -245,11 +245,12 @@ struct Work<'a> {
 /// one face at a time against the same large islands; each pass gathering a neighbour of tens of
 /// thousands of faces was most of the join's time (the horse's join, 0.5 s on one core). The
 /// per-face values are kept in step with the island's members as faces come and go (a face's
-/// coordinates never change: joins only append new ones), and the totals are summed again from
-/// them in the members' order after every change, so every value is exactly what a fresh pass
-/// over the island gives.
+/// coordinates never change: joins only append new ones); the totals, sums in the members'
+/// order, are summed again after a removal and continued by an appended face's values (a
+/// sequential sum's next step), so every value is exactly what a fresh pass over the island
+/// gives.
 #[derive(Clone, Debug, Default)]
-struct NeighbourSums {
+struct NeighbourValues {
     /// Per face (members' order), its UV triangle.
     uv: Vec<[[f64; 2]; 3]>,
     /// Per face, twice its signed UV area.
@@ -258,11 +259,11 @@ struct NeighbourSums {
     area_uv: Vec<f64>,
     /// Per face, its 3-D area.
     area_3d: Vec<f64>,
-    /// The sums over the faces; `None` after a face came or went.
+    /// The sums over the faces; `None` until asked for and after a face was removed.
     totals: Option<Totals>,
 }
 
-/// An island's sums ([`NeighbourSums`]).
+/// An island's sums ([`NeighbourValues`]).
 #[derive(Clone, Copy, Debug)]
 struct Totals {
     /// Twice the signed UV area.
@@ -275,7 +276,7 @@ struct Totals {
     distortion: Option<f64>,
 }
 
-impl NeighbourSums {
+impl NeighbourValues {
     /// Appends a face (its UV triangle `uv`, its 3-D area `area3`). The totals, sums in the
     /// members' order, take its values last: the same bits as summing again.
     fn push(&mut self, uv: [[f64; 2]; 3], area3: f64) {
@@ -356,9 +357,8 @@ impl Work<'_> {
         growth: Growth,
         seeds: Seeds,
     ) -> Option<Placed> {
-        let Totals { signed, unsigned, area3: nb_area3, distortion: alone } =
-            self.neighbour_sums(nb).totals();
-        let nb_sums = self.sums[nb as usize].as_ref().expect("computed above");
+        let Totals { signed, unsigned, area3: nb_area3, distortion: alone } = self.neighbour(nb).totals();
+        let nb_values = self.kept[nb as usize].as_ref().expect("computed above");
         let nb_faces = &self.members[nb as usize];
         if signed == 0.0 || unsigned <= 0.0 {
             return None;
@@ -486,7 +486,7 @@ impl Work<'_> {
                 }
             }
         }
-        let near: Vec<(usize, [[f64; 2]; 3])> = nb_sums
+        let near: Vec<(usize, [[f64; 2]; 3])> = nb_values
             .uv
             .iter()
             .filter(|t| (0..2).all(|k| t.iter().any(|p| p[k] >= lo[k]) && t.iter().any(|p| p[k] <= hi[k])))
@@ -503,14 +503,14 @@ impl Work<'_> {
         }
         // The neighbour's area distortion (PartUV's measure) may rise only a little.
         let area_3d: Vec<f64> =
-            nb_sums.area_3d.iter().copied().chain(faces.iter().map(|&f| self.area3[f as usize])).collect();
+            nb_values.area_3d.iter().copied().chain(faces.iter().map(|&f| self.area3[f as usize])).collect();
         let area_uv: Vec<f64> =
-            nb_sums.area_uv.iter().copied().chain(joined.iter().map(|&t| area2(t).abs())).collect();
+            nb_values.area_uv.iter().copied().chain(joined.iter().map(|&t| area2(t).abs())).collect();
         let set: Vec<u32> = (0..area_3d.len() as u32).collect();
         let distortion = |n: usize| area_distortion(&area_3d, &area_uv, &set[..n]).value.unwrap_or(1.0);
         let alone = alone.unwrap_or_else(|| distortion(nb_faces.len()));
         let grown = distortion(set.len());
-        if let Some(totals) = self.sums[nb as usize].as_mut().and_then(|s| s.totals.as_mut()) {
+        if let Some(totals) = self.kept[nb as usize].as_mut().and_then(|s| s.totals.as_mut()) {
             totals.distortion = Some(alone);
         }
         if grown > alone + MAX_DISTORTION_RISE {
@@ -520,11 +520,11 @@ impl Work<'_> {
         Some(Placed { corners, new_values })
     }
 
-    /// Island `nb`'s [`NeighbourSums`], kept or from a pass over its faces.
-    fn neighbour_sums(&mut self, nb: u32) -> &mut NeighbourSums {
-        let Work { sums, members, tris, coords, area3, .. } = self;
-        sums[nb as usize].get_or_insert_with(|| {
-            let mut kept = NeighbourSums::default();
+    /// Island `nb`'s [`NeighbourValues`], kept or from a pass over its faces.
+    fn neighbour(&mut self, nb: u32) -> &mut NeighbourValues {
+        let Work { kept, members, tris, coords, area3, .. } = self;
+        kept[nb as usize].get_or_insert_with(|| {
+            let mut kept = NeighbourValues::default();
             for &g in &members[nb as usize] {
                 kept.push(tris[g as usize].map(|c| coords[c as usize]), area3[g as usize]);
             }
@@ -549,20 +549,20 @@ impl Work<'_> {
         let members = &mut self.members[own as usize];
         if let Some(index) = members.iter().position(|&g| g == f) {
             members.remove(index);
-            if let Some(kept) = &mut self.sums[own as usize] {
+            if let Some(kept) = &mut self.kept[own as usize] {
                 kept.remove(index);
             }
         }
         self.members[nb as usize].push(f);
         let (uv, area3) = (self.uv_of(f), self.area3[f as usize]);
-        if let Some(kept) = &mut self.sums[nb as usize] {
+        if let Some(kept) = &mut self.kept[nb as usize] {
             kept.push(uv, area3);
         }
     }
 
     /// Writes `placed` for island `s`'s `faces`, which now belong to `nb`.
     fn commit(&mut self, s: usize, nb: u32, faces: &[u32], placed: Placed) {
-        self.sums[s] = None;
+        self.kept[s] = None;
         let base = self.coords.len() as u32;
         self.coords.extend_from_slice(&placed.new_values);
         for (&f, corners) in faces.iter().zip(&placed.corners) {
@@ -573,9 +573,9 @@ impl Work<'_> {
             self.label[f as usize] = nb;
         }
         let moved = std::mem::take(&mut self.members[s]);
-        if self.sums[nb as usize].is_some() {
+        if self.kept[nb as usize].is_some() {
             let added: Vec<_> = moved.iter().map(|&f| (self.uv_of(f), self.area3[f as usize])).collect();
-            let kept = self.sums[nb as usize].as_mut().expect("checked above");
+            let kept = self.kept[nb as usize].as_mut().expect("checked above");
             for (uv, area3) in added {
                 kept.push(uv, area3);
             }
@@ -594,7 +594,7 @@ mod tests {
     /// joined, are bit for bit those of a fresh pass over the islands as they then are: a kept
     /// value that drifted would change which joins pass their checks.
     #[test]
-    fn kept_neighbour_sums_equal_a_fresh_pass_after_moves() {
+    fn kept_neighbour_values_equal_a_fresh_pass_after_moves() {
         use rand::{Rng, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
         // A 12 × 12 grid with wobbly UVs, its faces split into three islands by column.
@@ -610,19 +610,19 @@ mod tests {
             area3: face_areas_3d(&mesh),
             coords: uv.coords.iter().map(|p| p.map(f64::from)).collect(),
             tris: uv.triangles.clone(),
-            sums: vec![None; 3],
+            kept: vec![None; 3],
             members,
             label,
         };
         let fresh = |w: &Work, i: usize| {
-            let mut f = NeighbourSums::default();
+            let mut f = NeighbourValues::default();
             for &g in &w.members[i] {
                 f.push(w.uv_of(g), w.area3[g as usize]);
             }
             f.totals();
             f
         };
-        let same = |a: &NeighbourSums, b: &NeighbourSums| {
+        let same = |a: &NeighbourValues, b: &NeighbourValues| {
             let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
             let (ta, tb) = (a.totals.unwrap(), b.totals.unwrap());
             a.uv == b.uv
@@ -633,7 +633,7 @@ mod tests {
                     == [tb.signed, tb.unsigned, tb.area3].map(f64::to_bits)
         };
         for i in 0..3 {
-            work.neighbour_sums(i).totals();
+            work.neighbour(i).totals();
         }
         for step in 0..60u32 {
             // A face of one island moves to another, keeping its own coordinates (one new
@@ -654,7 +654,7 @@ mod tests {
             for i in 0..3 {
                 if step % 3 == 0 {
                     // Totals read between moves, as tries do.
-                    work.neighbour_sums(i).totals();
+                    work.neighbour(i).totals();
                 }
             }
         }
@@ -662,10 +662,10 @@ mod tests {
         let faces = work.members[0].clone();
         let corners = faces.iter().map(|&f| work.tris[f as usize].map(Corner::Existing)).collect();
         work.commit(0, 1, &faces, Placed { corners, new_values: Vec::new() });
-        assert!(work.members[0].is_empty() && work.sums[0].is_none());
+        assert!(work.members[0].is_empty() && work.kept[0].is_none());
         for i in 1..3u32 {
-            work.neighbour_sums(i).totals();
-            let kept = work.sums[i as usize].clone().unwrap();
+            work.neighbour(i).totals();
+            let kept = work.kept[i as usize].clone().unwrap();
             assert!(same(&kept, &fresh(&work, i as usize)), "island {i}");
         }
     }
