@@ -1678,30 +1678,31 @@ impl Patch {
             let island_bound = self.max_step(&p, &d);
             let scaffold_bound = scaffold.as_ref().map_or(f64::INFINITY, |sc| sc.max_step(&p, &d));
             let bound = island_bound.min(scaffold_bound);
-            let total = |q: &[[f64; 2]]| -> Option<f64> {
-                let e = self.objective(q, terms)?;
+            // The objective `e` at `q` plus the scaffold's energy there: what the line search lowers.
+            let with_scaffold = |q: &[[f64; 2]], e: f64| -> Option<f64> {
                 match &scaffold {
                     Some(sc) => Some(e + sc.energy(q)?),
                     None => Some(e),
                 }
             };
-            let Some(now) = total(&p) else { break };
+            // `energy` is the objective at `p` already (its value when `p` was accepted).
+            let Some(now) = with_scaffold(&p, energy) else { break };
             let mut t = (STEP_SHARE * bound).min(1.0);
             let mut accepted = None;
             for _ in 0..=MAX_HALVINGS {
                 let q: Vec<[f64; 2]> =
                     p.iter().zip(&d).map(|(a, b)| [a[0] + t * b[0], a[1] + t * b[1]]).collect();
-                if let Some(e) = total(&q)
-                    && e < now
+                if let Some(e) = self.objective(&q, terms)
+                    && let Some(total) = with_scaffold(&q, e)
+                    && total < now
                     && self.is_injective(&q)
                 {
-                    accepted = Some(q);
+                    accepted = Some((q, e));
                     break;
                 }
                 t *= 0.5;
             }
-            let Some(q) = accepted else { break };
-            let Some(e) = self.objective(&q, terms) else { break };
+            let Some((q, e)) = accepted else { break };
             let done = converged(energy - e, energy, isometric, opts);
             (p, energy) = (q, e);
             if done {
