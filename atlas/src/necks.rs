@@ -506,53 +506,78 @@ fn neck_cuts(mesh: &TriMesh, uv: &UvLayer, faces: &[u32], count: usize) -> Vec<(
         }
     }
     let total = uv_area(uv, faces);
-    let mut taken: Vec<(usize, usize)> = Vec::new();
-    let mut cuts = Vec::new();
-    for &(_, a, b) in &pairs {
-        if cuts.len() >= count {
-            break;
-        }
-        if taken.iter().any(|&(x, y)| (near(a, x) && near(b, y)) || (near(a, y) && near(b, x))) {
-            continue;
-        }
+    // Every pair of faces joined across an edge between two unknowns (collapsed faces join
+    // too), by the edge's index in `all`: what `two_parts` walks for every candidate.
+    let mut all: Vec<(u32, u32)> = by_edge.keys().copied().filter(|e| e.0 != e.1).collect();
+    all.sort();
+    let index: HashMap<(u32, u32), u32> = all.iter().enumerate().map(|(i, &e)| (e, i as u32)).collect();
+    let joins: Vec<[u32; 3]> = all
+        .iter()
+        .enumerate()
+        .flat_map(|(i, e)| by_edge[e].windows(2).map(move |w| [i as u32, w[0], w[1]]))
+        .collect();
+    // A pair's cut: the shortest path between its ends through the inside, the two parts it
+    // leaves, and the path's 3-D length; `None` when it does not split the island into two
+    // parts of at least `MIN_PART_SHARE` each.
+    let cut_of = |a: usize, b: usize| -> Option<(Vec<bool>, f64)> {
         let (va, vb) = (lp[a], lp[b]);
         let (_, prev, reached) =
             shortest_paths(&adj, &[va], |v| v == vb, |v| v == vb || !on_boundary[v as usize]);
-        if reached.is_none() {
-            continue;
-        }
-        let mut cut_edges: HashSet<(u32, u32)> = HashSet::new();
+        reached?;
+        let mut cut = vec![false; all.len()];
         let mut seam = 0.0;
         for (p, v) in path_back(&prev, vb) {
-            cut_edges.insert((p.min(v), p.max(v)));
+            // Every path edge joins two unknowns of the island (`adj` holds no other).
+            cut[index[&(p.min(v), p.max(v))] as usize] = true;
             seam += length3(p, v);
         }
-        let Some(side) = two_parts(corners.len(), &by_edge, &cut_edges) else { continue };
+        let side = two_parts(corners.len(), &joins, &cut)?;
         let moved_faces: Vec<u32> = faces.iter().zip(&side).filter(|(_, s)| **s).map(|(&f, _)| f).collect();
         let moved = uv_area(uv, &moved_faces);
-        if moved < MIN_PART_SHARE * total || total - moved < MIN_PART_SHARE * total {
-            continue;
+        (moved >= MIN_PART_SHARE * total && total - moved >= MIN_PART_SHARE * total).then_some((side, seam))
+    };
+    let excluded = |a: usize, b: usize, taken: &[(usize, usize)]| {
+        taken.iter().any(|&(x, y)| (near(a, x) && near(b, y)) || (near(a, y) && near(b, x)))
+    };
+    // Pairs in order of score, each taken unless near a taken one or without a cut. A pair's cut
+    // does not depend on what was taken, so up to a thread's worth of the next pairs not yet
+    // excluded are cut at once and then taken in order: the same cuts as one at a time (a pair
+    // excluded by one taken earlier in its batch is skipped as it would have been).
+    let batch = rayon::current_num_threads().max(1);
+    let mut taken: Vec<(usize, usize)> = Vec::new();
+    let mut cuts = Vec::new();
+    let mut next = 0;
+    while cuts.len() < count && next < pairs.len() {
+        let mut ends = Vec::with_capacity(batch);
+        while ends.len() < batch && next < pairs.len() {
+            let (_, a, b) = pairs[next];
+            next += 1;
+            if !excluded(a, b, &taken) {
+                ends.push((a, b));
+            }
         }
-        taken.push((a, b));
-        cuts.push((side, seam));
+        let found: Vec<_> = ends.par_iter().map(|&(a, b)| cut_of(a, b)).collect();
+        for ((a, b), cut) in ends.into_iter().zip(found) {
+            if cuts.len() >= count || excluded(a, b, &taken) {
+                continue;
+            }
+            if let Some(cut) = cut {
+                taken.push((a, b));
+                cuts.push(cut);
+            }
+        }
     }
     cuts
 }
 
-/// The island's `count` faces joined across the edges they share (`by_edge`) except `cut` and
-/// edges from an unknown to itself: for exactly two parts, whether each face is in the part
-/// without the first face.
-fn two_parts(
-    count: usize,
-    by_edge: &HashMap<(u32, u32), Vec<u32>>,
-    cut: &HashSet<(u32, u32)>,
-) -> Option<Vec<bool>> {
+/// The two parts of an island's `count` faces, joined across every edge of `joins` (`[edge,
+/// face, face]`) that is not `cut`: `side[t]` is true on the part without face 0; `None`
+/// unless there are exactly two parts.
+fn two_parts(count: usize, joins: &[[u32; 3]], cut: &[bool]) -> Option<Vec<bool>> {
     let mut dsu = Dsu::new(count);
-    for (&(a, b), faces) in by_edge {
-        if a != b && !cut.contains(&(a, b)) {
-            for w in faces.windows(2) {
-                dsu.union(w[0], w[1]);
-            }
+    for &[e, f, g] in joins {
+        if !cut[e as usize] {
+            dsu.union(f, g);
         }
     }
     let root = dsu.find(0);
@@ -693,6 +718,25 @@ mod tests {
             let several = run(threads);
             assert_eq!(several.report, one.report, "{threads} threads");
             assert!(several.mesh == one.mesh, "{threads} threads");
+        }
+    }
+
+    #[test]
+    fn an_islands_neck_candidates_do_not_depend_on_the_thread_count() {
+        // The comb's boundary comes close to itself at many places, so pairs near a taken one
+        // are skipped; candidates are cut a thread's worth at once and must be taken as one at
+        // a time would take them.
+        let comb = shape(32, 16, 8.0, 4.0, |x, y| y < 1.0 || (x % 2.0) < 1.0);
+        let uv = comb.uv.as_ref().unwrap();
+        let faces: Vec<u32> = (0..comb.triangles.len() as u32).collect();
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| neck_cuts(&comb, uv, &faces, 8))
+        };
+        let one = run(1);
+        assert!(one.len() >= 4, "{} candidates", one.len());
+        for threads in [2, 3, 5] {
+            assert!(run(threads) == one, "{threads} threads");
         }
     }
 
