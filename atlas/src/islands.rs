@@ -83,8 +83,6 @@
 //! (islands are prepared and footprints rasterised in parallel but kept in island order, islands
 //! are placed one after the other; no hashing order; ties broken by index).
 
-use std::sync::Arc;
-
 use foldhash::{HashMap, HashMapExt};
 use rayon::prelude::*;
 
@@ -94,8 +92,8 @@ use nuvo_geometry::{TriMesh, UvLayer};
 use crate::error::AtlasError;
 use crate::geom::to_dvec3;
 use crate::uvstats::{
-    DEGENERATE_AREA_REL, MeshEdges, degenerate_3d_area, face_area_3d, face_uv_area2, is_degenerate_3d,
-    require_uv, uv_charts,
+    DEGENERATE_AREA_REL, degenerate_3d_area, face_area_3d, face_uv_area2, is_degenerate_3d, require_uv,
+    uv_charts,
 };
 
 mod shapes;
@@ -248,16 +246,8 @@ impl ScaleTest {
     ) -> Result<(Self, Option<IslandCache>), AtlasError> {
         let uv = require_uv(mesh)?;
         check_options(opts)?;
-        let edges = cache.map(|c| match &c.edges {
-            Some(edges) if edges.fit(mesh) => Arc::clone(edges),
-            _ => Arc::new(MeshEdges::of(mesh)),
-        });
-        let (island_of_face, n) = match &edges {
-            Some(edges) => edges.uv_charts(mesh, uv),
-            None => uv_charts(mesh, uv),
-        };
+        let (island_of_face, n) = uv_charts(mesh, uv);
         let (layout, next) = Layout::of_cached(mesh, uv, &island_of_face, n, opts.rotate, cache);
-        let next = next.map(|next| IslandCache { edges, ..next });
         let orders = ShapeOrders::of(&layout.islands);
         Ok((ScaleTest { layout, orders, opts: *opts }, next))
     }
@@ -295,9 +285,6 @@ pub struct IslandCache {
     entries: HashMap<Vec<u32>, CachedIsland>,
     /// Islands taken from the cache so far.
     hits: usize,
-    /// The mesh's edge uses, which find the islands of each layout: reused while the triangles
-    /// are the same (a cut changes only the UV layer), shared by trials run at once.
-    edges: Option<Arc<MeshEdges>>,
 }
 
 impl IslandCache {
@@ -459,7 +446,7 @@ impl Layout {
                     (f, CachedIsland { points: points.clone(), rotate, outlined, island: island.clone() })
                 })
                 .collect();
-            IslandCache { entries, hits, edges: None }
+            IslandCache { entries, hits }
         });
         let islands = prepared.into_iter().map(|(island, ..)| island).collect();
         (Self { islands, coords, triangles }, next)
