@@ -33,7 +33,7 @@
 //!   values for an even count) and the 90th percentile (the value at rank `⌈0.9 n⌉`); 1 for
 //!   both when no face is measurable.
 
-use std::collections::HashMap;
+use foldhash::{HashMap, HashMapExt};
 use std::sync::{Arc, Mutex};
 
 use glam::DVec3;
