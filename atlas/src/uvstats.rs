@@ -225,7 +225,7 @@ pub(crate) struct MeshEdges {
 /// a caller that alternates between two (tests running side by side share the memo too).
 const SHARED_MESHES: usize = 2;
 
-/// The edge uses of the meshes asked about last, newest first, at most `capacity`.
+/// The edge uses of the meshes asked about last, the last asked first, at most `capacity`.
 struct RecentEdges {
     entries: Mutex<Vec<Arc<MeshEdges>>>,
     capacity: usize,
@@ -237,12 +237,18 @@ impl RecentEdges {
     }
 
     /// The entry with `mesh`'s triangles (compared in full, so a hit is exactly what sorting
-    /// again would give), else the edge uses sorted now and kept as the newest entry.
+    /// again would give), made the newest; else the edge uses sorted now and kept as the newest
+    /// entry, the oldest dropped beyond `capacity`.
     fn of(&self, mesh: &TriMesh) -> Arc<MeshEdges> {
         // A poisoned lock still holds whole entries: each is pushed complete.
         let entries = || self.entries.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
-        if let Some(hit) = entries().iter().find(|e| e.fit(mesh)) {
-            return Arc::clone(hit);
+        {
+            let mut entries = entries();
+            if let Some(i) = entries.iter().position(|e| e.fit(mesh)) {
+                let hit = entries.remove(i);
+                entries.insert(0, Arc::clone(&hit));
+                return hit;
+            }
         }
         // Sorted outside the lock: other threads' look-ups need not wait for it.
         let made = Arc::new(MeshEdges { triangles: mesh.triangles.clone(), uses: EdgeUses::of(mesh) });
@@ -345,8 +351,8 @@ struct EdgeUse {
 }
 
 /// Every use of every non-collapsed edge of a mesh, sorted by (edge, face) so the uses of one edge
-/// are adjacent and their order does not depend on the thread count. Built once per analysis and
-/// shared by the chart and crease passes.
+/// are adjacent and their order does not depend on the thread count. Built once per mesh
+/// ([`MeshEdges::shared`]) and shared by the chart and crease passes.
 struct EdgeUses(Vec<EdgeUse>);
 
 impl EdgeUses {
@@ -569,9 +575,10 @@ mod tests {
         let first_b = got(&b);
         assert!(!Arc::ptr_eq(&first_a, &first_b));
         assert!(Arc::ptr_eq(&first_a, &got(&a)) && Arc::ptr_eq(&first_b, &got(&b)), "both kept");
+        got(&a);
         got(&c);
-        assert!(Arc::ptr_eq(&first_b, &got(&b)), "the newer kept");
-        assert!(!Arc::ptr_eq(&first_a, &got(&a)), "the oldest dropped");
+        assert!(Arc::ptr_eq(&first_a, &got(&a)), "the one asked about last kept");
+        assert!(!Arc::ptr_eq(&first_b, &got(&b)), "the other dropped");
         assert_eq!(
             uv_charts(&c, c.uv.as_ref().unwrap()),
             charts_along(&EdgeUses::of(&c), &c, c.uv.as_ref().unwrap())
