@@ -503,21 +503,18 @@ fn neck_cuts(mesh: &TriMesh, uv: &UvLayer, faces: &[u32], count: usize) -> Vec<(
         let d = (arc[i] - arc[j]).abs();
         d.min(perimeter - d) < 0.5 * MIN_ARC * perimeter
     };
-    // Vertex adjacency with UV lengths, for the paths.
-    let mut adj: Vec<Vec<(u32, f64)>> = vec![Vec::new(); n];
-    let mut edges: Vec<&(u32, u32)> = by_edge.keys().filter(|e| uses(e) > 0).collect();
-    edges.sort();
-    for &&(a, b) in &edges {
-        if a != b {
-            adj[a as usize].push((b, dist(a, b)));
-            adj[b as usize].push((a, dist(a, b)));
-        }
-    }
-    let total = uv_area(uv, faces);
-    // Every pair of faces joined across an edge between two unknowns (collapsed faces join
-    // too), by the edge's index in `all`: what `two_parts` walks for every candidate.
+    // The edges between two unknowns, sorted.
     let mut all: Vec<(u32, u32)> = by_edge.keys().copied().filter(|e| e.0 != e.1).collect();
     all.sort();
+    // Vertex adjacency with UV lengths, for the paths: the edges some non-collapsed face uses.
+    let mut adj: Vec<Vec<(u32, f64)>> = vec![Vec::new(); n];
+    for &(a, b) in all.iter().filter(|e| uses(e) > 0) {
+        adj[a as usize].push((b, dist(a, b)));
+        adj[b as usize].push((a, dist(a, b)));
+    }
+    let total = uv_area(uv, faces);
+    // Every pair of faces joined across an edge of `all` (collapsed faces join too), by the
+    // edge's index there: what `two_parts` walks for every candidate.
     let index: HashMap<(u32, u32), u32> = all.iter().enumerate().map(|(i, &e)| (e, i as u32)).collect();
     let joins: Vec<[u32; 3]> = all
         .iter()
