@@ -1,21 +1,26 @@
-//! Matrix products with bf16 inputs and f32 accumulation on the AMX tiles of recent Intel Xeons
-//! (Sapphire Rapids and later): the lower-precision lever of issue 20.
+//! Matrix products with bf16 inputs and f32 accumulation, on the AMX tiles of recent Intel
+//! Xeons (Sapphire Rapids and later, [`amx`]) or on AVX-512 BF16 where a CPU has that but no
+//! tiles (AMD Zen 4 and later, [`dot`]): the lower-precision lever of issue 20.
 //!
 //! [`MatmulPrecision::Bf16`] asks the fused linear layers ([`crate::Tape::linear`]) to round both
 //! factors of each of their three products (forward `x·W`, backward `dz·Wᵀ` and `xᵀ·dz`) to
-//! bfloat16 and multiply them on the tiles, accumulating in f32. On a CPU without AMX (or where
-//! the kernel refuses the tile permission) the layers run in f32 exactly as with
-//! [`MatmulPrecision::F32`], and [`bf16_matmul_available`] says so.
+//! bfloat16 and multiply them on this machine's [`Bf16Kernel`], accumulating in f32. On a CPU
+//! with neither (or where Linux refuses the tile permission and there is no AVX-512 BF16) the
+//! layers run in f32 exactly as with [`MatmulPrecision::F32`], and [`bf16_matmul_available`]
+//! says so. The kernel is chosen once per process ([`bf16_kernel`]: the tiles first).
 //!
 //! Definitions and invariants (exact):
 //! - **Rounding**: each f32 factor is rounded to the nearest bf16, ties to even (the top 16 bits
 //!   after adding `0x7fff` plus the lowest kept bit); NaNs stay NaNs. So a factor that is already a
 //!   bf16 value (8 significant bits) is used exactly, and a product of such values whose partial
-//!   sums are exact in f32 equals the f32 product bit for bit (the unit tests' known answers).
-//! - **Accumulation**: `TDPBF16PS` adds, per output element, the products of 32 consecutive inner
-//!   indices to its f32 accumulator; the inner dimension is walked in blocks of 32 in increasing
-//!   order, zero-padded at its end. With `accumulate`, the finished block product is added to the
-//!   destination once at the end (`dst + A·B`, not interleaved).
+//!   sums are exact in f32 equals the f32 product bit for bit (the unit tests' known answers, on
+//!   every kernel).
+//! - **Accumulation**: per output element, the products of the inner indices are added to one f32
+//!   accumulator, the inner dimension walked in increasing order, zero-padded at its end to a
+//!   multiple of 32 (`TDPBF16PS` adds 32 inner indices an instruction, `VDPBF16PS` 2; the two
+//!   kernels' bits may differ, so a bf16 run repeats per machine kind). With `accumulate`, the
+//!   finished block product is added to the destination once at the end (`dst + A·B`, not
+//!   interleaved).
 //! - **Determinism**: each output element's sum is formed in the same order whatever the row
 //!   range of the call, its position within it, and the thread that runs it (no split of the inner
 //!   dimension, ever). So results are bit-identical for any thread count, and a product computed
@@ -23,20 +28,17 @@
 //!   ([`crate::kernels`]).
 //! - **Which products**: those whose inner dimension and output width are both at least
 //!   [`MIN_SIDE`]; narrower ones (a 2-wide UV head, a 3-wide position head) stay f32, where the
-//!   tiles would mostly multiply padding. The rule depends on the shape only.
-//! - **Tiles**: one 32×32 output block at a time in four accumulator tiles (`tmm0..3`), two
-//!   16×32 tiles of the left factor (`tmm4, 5`) and two 32×16 tiles of the right factor in VNNI
-//!   pairs (`tmm6, 7`). The right factor is packed once per product ([`PackedRight`]), the left
-//!   one 32 rows at a time into a per-thread buffer, or, when its columns are contiguous (the
-//!   `xᵀ` of a weight gradient), whole in one pass ([`PackedLeft`]) — or, for a layer that
+//!   kernels would mostly multiply padding. The rule depends on the shape only.
+//! - **Packing**: both kernels read the same packed factors, one 32×32 output block at a time
+//!   ([`block_row`]). The right factor is packed once per product in VNNI pairs ([`PackedRight`]),
+//!   the left one 32 rows at a time into a per-thread buffer, or, when its columns are contiguous
+//!   (the `xᵀ` of a weight gradient), whole in one pass ([`PackedLeft`]) — or, for a layer that
 //!   trains, block by block in its forward from the pairs of `x`'s rows packed for its product
-//!   ([`gemm_bf16_single_thread_packing_xt`]; the tape keeps it for the backward). Only the packing differs
-//!   between these paths, never the order of a sum.
+//!   ([`gemm_bf16_single_thread_packing_xt`]; the tape keeps it for the backward). Only the
+//!   packing differs between these paths, never the order of a sum.
 //!
-//! Permission: Linux gives a process the AMX state only after it asks
-//! (`arch_prctl(ARCH_REQ_XCOMP_PERM, XFEATURE_XTILEDATA)`); [`bf16_matmul_available`] asks once,
-//! after CPUID says the CPU has AMX-TILE and AMX-BF16. Using a tile instruction without it is a
-//! SIGILL, so every kernel entry is behind that check.
+//! Permission: Linux gives a process the AMX state only after it asks ([`amx::granted`]); a
+//! tile instruction without it is a SIGILL, so the tiles are chosen only after it was granted.
 
 use std::cell::RefCell;
 use std::sync::OnceLock;
@@ -54,8 +56,8 @@ pub enum MatmulPrecision {
     /// f32 factors, f32 accumulation (the `gemm` crate's kernels).
     #[default]
     F32,
-    /// bf16 factors, f32 accumulation, on AMX tiles where the CPU has them (module docs); f32
-    /// elsewhere.
+    /// bf16 factors, f32 accumulation, on AMX tiles or AVX-512 BF16 where the CPU has them
+    /// (module docs); f32 elsewhere.
     Bf16,
 }
 
@@ -78,32 +80,57 @@ const BLOCK: usize = 32;
 /// The inner dimension consumed by one `TDPBF16PS`, in bf16 elements.
 const INNER: usize = 32;
 
-/// Whether this process can multiply on AMX tiles in bf16: the CPU has AMX-TILE and AMX-BF16 and
-/// the kernel granted the tile state (module docs). Asked once; later calls read the answer.
-pub fn bf16_matmul_available() -> bool {
-    static AVAILABLE: OnceLock<bool> = OnceLock::new();
-    *AVAILABLE.get_or_init(detect_and_request)
+mod amx;
+mod dot;
+
+/// The instructions that multiply the bf16 factors on this machine (module docs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Bf16Kernel {
+    /// AMX tiles, `TDPBF16PS` (Intel Xeon, Sapphire Rapids and later).
+    Amx,
+    /// AVX-512 BF16, `VDPBF16PS` on 512-bit registers (AMD Zen 4 and later, Intel Cooper Lake).
+    Avx512,
 }
 
-#[cfg(all(target_arch = "x86_64", target_os = "linux"))]
-fn detect_and_request() -> bool {
-    // CPUID leaf 7, sub-leaf 0: EDX bit 22 AMX-BF16, bit 24 AMX-TILE.
-    let leaf7 = std::arch::x86_64::__cpuid_count(7, 0);
-    let has_amx = leaf7.edx & (1 << 22) != 0 && leaf7.edx & (1 << 24) != 0;
-    // The packing runs on AVX-512F, which every CPU with AMX has; checked all the same.
-    if !has_amx || !std::arch::is_x86_feature_detected!("avx512f") {
-        return false;
+impl Bf16Kernel {
+    /// What a user reads: the hardware the products run on.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Bf16Kernel::Amx => "AMX tiles",
+            Bf16Kernel::Avx512 => "AVX-512 BF16",
+        }
     }
-    const ARCH_REQ_XCOMP_PERM: libc::c_long = 0x1023;
-    const XFEATURE_XTILEDATA: libc::c_long = 18;
-    // SAFETY: a plain system call with integer arguments; it changes only this process's permitted
-    // extended state (it fails, returning -1, on kernels without AMX support).
-    unsafe { libc::syscall(libc::SYS_arch_prctl, ARCH_REQ_XCOMP_PERM, XFEATURE_XTILEDATA) == 0 }
 }
 
-#[cfg(not(all(target_arch = "x86_64", target_os = "linux")))]
-fn detect_and_request() -> bool {
-    false
+/// The kernel bf16 products run on in this process: the tiles where the CPU has AMX and Linux
+/// grants its state, else AVX-512 BF16 where the CPU has it, else none (the layers run f32).
+/// Asked once; later calls read the answer.
+pub fn bf16_kernel() -> Option<Bf16Kernel> {
+    static KERNEL: OnceLock<Option<Bf16Kernel>> = OnceLock::new();
+    *KERNEL.get_or_init(|| kernels_here().first().copied())
+}
+
+/// Every kernel this process can run, the preferred first (the tiles: 16 times the products of
+/// an instruction). The tests run each of them.
+fn kernels_here() -> Vec<Bf16Kernel> {
+    [(Bf16Kernel::Amx, amx::granted()), (Bf16Kernel::Avx512, dot::available())]
+        .into_iter()
+        .filter_map(|(kernel, here)| here.then_some(kernel))
+        .collect()
+}
+
+/// Whether this process can multiply in bf16 ([`bf16_kernel`] names how).
+pub fn bf16_matmul_available() -> bool {
+    bf16_kernel().is_some()
+}
+
+/// The kernel of this process, for the packed products' entry points.
+///
+/// # Panics
+/// When there is none (a programming error: callers take the bf16 path only when
+/// [`bf16_matmul_available`]).
+fn chosen() -> Bf16Kernel {
+    bf16_kernel().expect("a bf16 product on a machine without AMX or AVX-512 BF16")
 }
 
 /// Whether a product with inner dimension `k` and output width `n` runs on the tiles when the
@@ -205,10 +232,6 @@ unsafe fn pairs_along(block: &mut [u32; 256], m: MatRef<'_>, r0: usize, k0: usiz
 /// line: the layouts keep rows and tiles at multiples of 16 words ([`crate::lines`]).
 pub(crate) type Words = LineBuf<u32>;
 
-/// A 32 × 32 output block on whole cache lines (tile stores, [`crate::lines`]).
-#[repr(C, align(64))]
-struct OutBlock([f32; BLOCK * BLOCK]);
-
 /// The right factor `B` (`k × n`) of a product, rounded to bf16 and laid out for the tiles: `kp / 2`
 /// rows of `np` words, word `(q, j)` the pair `(B[2q][j], B[2q+1][j])` (the VNNI layout
 /// `TDPBF16PS` reads), `kp` = `k` rounded up to 32, `np` = `n` rounded up to 32, zeros in the
@@ -230,13 +253,13 @@ impl PackedRight {
     ///
     /// # Panics
     /// When [`bf16_matmul_available`] is false (the packing uses AVX-512, which every CPU with
-    /// AMX has).
+    /// AMX or AVX-512 BF16 has).
     pub(crate) fn new(b: MatRef<'_>) -> Self {
         let (k, n) = (b.rows, b.cols);
         let mut packed = PackedRight::unfilled(k, n);
         let np = packed.np;
         let chunk = 16 * np; // 16 word rows: one tile's height
-        // SAFETY: AVX-512F is present where AMX is (`unfilled` asserted it).
+        // SAFETY: AVX-512F is present where a bf16 kernel is (`unfilled` asserted it).
         let fill = |(c, rows): (usize, &mut [u32])| unsafe { pack_right_rows(rows, b, 16 * c, np) };
         if k * n >= 1 << 16 {
             packed.data.par_chunks_mut(chunk).enumerate().for_each(fill);
@@ -254,7 +277,7 @@ impl PackedRight {
     /// # Panics
     /// As [`PackedRight::new`].
     pub(crate) fn unfilled(k: usize, n: usize) -> Self {
-        assert!(bf16_matmul_available(), "PackedRight on a machine without AMX bf16");
+        assert!(bf16_matmul_available(), "PackedRight on a machine without bf16 products");
         let (kp, np) = (k.next_multiple_of(INNER), n.next_multiple_of(BLOCK));
         PackedRight { data: spare_words(kp / 2 * np), k, n, kp, np }
     }
@@ -277,11 +300,12 @@ impl PackedRight {
 /// # Panics
 /// When `block` is not row-major, or `words` is not one such block of its width.
 pub(crate) fn pack_right_block(words: &mut [u32], block: MatRef<'_>) {
-    assert!(bf16_matmul_available(), "packing on a machine without AMX bf16");
+    assert!(bf16_matmul_available(), "packing on a machine without bf16 products");
     assert_eq!(block.col_stride, 1, "pack_right_block packs row-major rows");
     let np = block.cols.next_multiple_of(BLOCK);
     assert!(words.len().is_multiple_of(np) && 2 * words.len() / np >= block.rows, "words of another block");
-    // SAFETY: AVX-512F is present where AMX is (asserted above); `words` holds whole word rows.
+    // SAFETY: AVX-512F is present where a bf16 kernel is (asserted above); `words` holds whole
+    // word rows.
     unsafe { pack_right_rows(words, block, 0, np) };
 }
 
@@ -371,7 +395,7 @@ impl PackedLeft {
     /// # Panics
     /// When [`bf16_matmul_available`] is false.
     pub(crate) fn for_transpose(m: usize, k: usize, mut words: Words) -> Self {
-        assert!(bf16_matmul_available(), "PackedLeft on a machine without AMX bf16");
+        assert!(bf16_matmul_available(), "PackedLeft on a machine without bf16 products");
         words.set_len(PackedLeft::words(m, k));
         PackedLeft { data: words, row_tiles: m.next_multiple_of(BLOCK) / 16, m, k }
     }
@@ -497,7 +521,7 @@ struct LeftTiles {
 /// On inconsistent dimensions, or when [`bf16_matmul_available`] is false (a programming error:
 /// callers choose this path only when it is true).
 pub(crate) fn gemm_bf16_single_thread(dst: &mut [f32], a: MatRef<'_>, b: &PackedRight, accumulate: bool) {
-    gemm_rows(dst, a, b, accumulate, None);
+    gemm_rows(dst, a, b, accumulate, None, chosen());
 }
 
 /// [`gemm_bf16_single_thread`] that also packs `aᵀ` as the left factor of a later product
@@ -522,11 +546,19 @@ pub(crate) fn gemm_bf16_single_thread_packing_xt(
             && xt.len() / (256 * row_tiles) * INNER >= a.rows,
         "words of another block"
     );
-    gemm_rows(dst, a, b, accumulate, Some(xt));
+    gemm_rows(dst, a, b, accumulate, Some(xt), chosen());
 }
 
-/// [`gemm_bf16_single_thread_packing_xt`], or without `xt` [`gemm_bf16_single_thread`].
-fn gemm_rows(dst: &mut [f32], a: MatRef<'_>, b: &PackedRight, accumulate: bool, xt: Option<&mut [u32]>) {
+/// [`gemm_bf16_single_thread_packing_xt`], or without `xt` [`gemm_bf16_single_thread`], on
+/// `kernel`.
+fn gemm_rows(
+    dst: &mut [f32],
+    a: MatRef<'_>,
+    b: &PackedRight,
+    accumulate: bool,
+    xt: Option<&mut [u32]>,
+    kernel: Bf16Kernel,
+) {
     let (m, n) = (a.rows, b.n);
     check(dst, a, b);
     if m == 0 || n == 0 {
@@ -538,7 +570,7 @@ fn gemm_rows(dst: &mut [f32], a: MatRef<'_>, b: &PackedRight, accumulate: bool, 
         left.set_zeroed(BLOCK * half);
         for i0 in (0..m).step_by(BLOCK) {
             let rows = BLOCK.min(m - i0);
-            // SAFETY: AVX-512F is present where AMX is (checked).
+            // SAFETY: AVX-512F is present where a bf16 kernel is (checked).
             unsafe { pack_left(left, a, i0, rows) };
             if let Some(tiles) = xt_blocks.as_mut().and_then(Iterator::next) {
                 // SAFETY: as above; `left` holds 32 rows of `half` words, `tiles` 256 · kp / 16.
@@ -552,7 +584,7 @@ fn gemm_rows(dst: &mut [f32], a: MatRef<'_>, b: &PackedRight, accumulate: bool, 
             };
             // SAFETY: the tile state was granted (checked); `left` holds 32 rows of `kp / 2`
             // words, which is all the kernel reads of it; `dst` rows `i0..i0 + rows` exist.
-            unsafe { block_row(&mut dst[i0 * n..(i0 + rows) * n], rows, tiles, b, accumulate) };
+            unsafe { block_row(kernel, &mut dst[i0 * n..(i0 + rows) * n], rows, tiles, b, accumulate) };
         }
     });
 }
@@ -585,25 +617,30 @@ fn check(dst: &[f32], a: MatRef<'_>, b: &PackedRight) {
     let (m, k, n) = (a.rows, a.cols, b.n);
     assert_eq!(k, b.k, "gemm_bf16: inner dimensions {k} and {} differ", b.k);
     assert_eq!(dst.len(), m * n, "gemm_bf16: destination holds {} values, expected {m}×{n}", dst.len());
-    assert!(bf16_matmul_available(), "gemm_bf16 called on a machine without AMX bf16");
+    assert!(bf16_matmul_available(), "gemm_bf16 called on a machine without bf16 products");
 }
 
 /// [`gemm_bf16_single_thread`] with blocks of 32 output rows spread over the pool (the same bits:
 /// module docs). A left factor whose columns are contiguous is packed whole first
 /// ([`PackedLeft`]).
 pub(crate) fn gemm_bf16(dst: &mut [f32], a: MatRef<'_>, b: &PackedRight, accumulate: bool) {
+    gemm_bf16_on(chosen(), dst, a, b, accumulate);
+}
+
+/// [`gemm_bf16`] on `kernel`.
+fn gemm_bf16_on(kernel: Bf16Kernel, dst: &mut [f32], a: MatRef<'_>, b: &PackedRight, accumulate: bool) {
     let n = b.n;
     if n == 0 || !packs_left_whole(a.rows) {
-        return gemm_bf16_single_thread(dst, a, b, accumulate);
+        return gemm_rows(dst, a, b, accumulate, None, kernel);
     }
     if a.row_stride == 1 && a.col_stride != 1 {
         check(dst, a, b);
-        // SAFETY: AVX-512F is present where AMX is (checked).
+        // SAFETY: both kernels' CPUs have AVX-512F (checked).
         let left = unsafe { PackedLeft::new(a, b.kp) };
-        return gemm_bf16_packed_left(dst, &left, b, accumulate);
+        return gemm_bf16_packed_left_on(kernel, dst, &left, b, accumulate);
     }
     dst.par_chunks_mut(BLOCK * n).enumerate().for_each(|(block, d)| {
-        gemm_bf16_single_thread(d, a.row_range(block * BLOCK, d.len() / n), b, accumulate);
+        gemm_rows(d, a.row_range(block * BLOCK, d.len() / n), b, accumulate, None, kernel);
     });
 }
 
@@ -613,6 +650,17 @@ pub(crate) fn gemm_bf16(dst: &mut [f32], a: MatRef<'_>, b: &PackedRight, accumul
 /// # Panics
 /// On inconsistent dimensions.
 pub(crate) fn gemm_bf16_packed_left(dst: &mut [f32], a: &PackedLeft, b: &PackedRight, accumulate: bool) {
+    gemm_bf16_packed_left_on(chosen(), dst, a, b, accumulate);
+}
+
+/// [`gemm_bf16_packed_left`] on `kernel`.
+fn gemm_bf16_packed_left_on(
+    kernel: Bf16Kernel,
+    dst: &mut [f32],
+    a: &PackedLeft,
+    b: &PackedRight,
+    accumulate: bool,
+) {
     let n = b.n;
     assert_eq!(a.k, b.k, "gemm_bf16: inner dimensions {} and {} differ", a.k, b.k);
     assert_eq!(dst.len(), a.m * n, "gemm_bf16: destination holds {} values, expected {}×{n}", dst.len(), a.m);
@@ -622,14 +670,37 @@ pub(crate) fn gemm_bf16_packed_left(dst: &mut [f32], a: &PackedLeft, b: &PackedR
     let q_step = 256 * a.row_tiles;
     let base = SendPtr(a.data.as_ptr());
     dst.par_chunks_mut(BLOCK * n).enumerate().for_each(|(block, d)| {
-        // SAFETY: row tiles 2·block and 2·block + 1 exist (rows rounded up to 32); the tile
-        // state was granted (`PackedLeft` exists only where it was); `d` holds this block's rows.
+        // SAFETY: row tiles 2·block and 2·block + 1 exist (rows rounded up to 32); `kernel` runs
+        // here (`PackedLeft` exists only where one does); `d` holds this block's rows.
         unsafe {
             let tiles =
                 LeftTiles { base: base.get().add(2 * block * 256), half_step: 256, q_step, stride: 64 };
-            block_row(d, d.len() / n, tiles, b, accumulate);
+            block_row(kernel, d, d.len() / n, tiles, b, accumulate);
         }
     });
+}
+
+/// One row of 32 × 32 output blocks, `dst` (`rows ≤ 32` × `b.n`) `=` or `+=` the left rows `a`
+/// times `b`, on `kernel` (its module: [`amx`], [`dot`]).
+///
+/// # Safety
+/// `kernel` must run on this machine ([`kernels_here`]); `a` must address 32 rows (2 halves of
+/// 16) of `b.kp / 2` words in its layout, and `dst` hold `rows × b.n` values.
+unsafe fn block_row(
+    kernel: Bf16Kernel,
+    dst: &mut [f32],
+    rows: usize,
+    a: LeftTiles,
+    b: &PackedRight,
+    accumulate: bool,
+) {
+    // SAFETY: the caller's.
+    unsafe {
+        match kernel {
+            Bf16Kernel::Amx => amx::block_row(dst, rows, a, b, accumulate),
+            Bf16Kernel::Avx512 => dot::block_row(dst, rows, a, b, accumulate),
+        }
+    }
 }
 
 /// Whether [`gemm_bf16`] packs a left factor of `rows` rows with contiguous columns whole
@@ -742,109 +813,6 @@ unsafe fn transpose16(block: &[u32; 256], dst: *mut u32, stride: usize) {
     }
 }
 
-/// The 64-byte tile configuration: palette 1, eight tiles of 16 rows × 64 bytes.
-#[repr(C, align(64))]
-struct TileConfig([u8; 64]);
-
-const TILE_CONFIG: TileConfig = {
-    let mut c = [0u8; 64];
-    c[0] = 1; // palette
-    let mut t = 0;
-    while t < 8 {
-        c[16 + 2 * t] = 64; // bytes per row (low byte of the u16 `colsb`)
-        c[48 + t] = 16; // rows
-        t += 1;
-    }
-    TileConfig(c)
-};
-
-/// One row of 32×32 output blocks: `dst` (`rows` × `b.n`) from the left tiles `a` and `b`.
-///
-/// # Safety
-/// The tile state must have been granted ([`bf16_matmul_available`]), `a` must address 2 row
-/// halves × `b.kp / 32` tiles of 16 rows of 64 bytes, and `dst` hold `rows × b.n` values.
-#[cfg(target_arch = "x86_64")]
-unsafe fn block_row(dst: &mut [f32], rows: usize, a: LeftTiles, b: &PackedRight, accumulate: bool) {
-    use std::arch::asm;
-    let (n, np, kp) = (b.n, b.np, b.kp);
-    debug_assert!(dst.len() == rows * n && b.data.len() == kp / 2 * np);
-    let mut out = OutBlock([0f32; BLOCK * BLOCK]);
-    let out = &mut out.0;
-    let (b_stride, out_stride) = ((np * 4) as isize, (BLOCK * 4) as isize);
-    // SAFETY (for every asm block below): the configuration is a valid palette-1 layout; every
-    // tile load reads 16 rows of 64 bytes: a left tile the caller vouches for, or 16 word rows of
-    // `b` from row `qb · 16`, columns `j0 .. j0 + 32` (inside: `kp / 2` rows of `np ≥ j0 + 32`
-    // words); every store writes 16 rows of 64 bytes inside `out` or, for a whole block (32
-    // rows, 32 columns from `j0`), inside `dst`'s rows; the tiles are released before returning.
-    unsafe {
-        asm!("ldtilecfg [{}]", in(reg) TILE_CONFIG.0.as_ptr(), options(nostack, readonly));
-        for j0 in (0..n).step_by(BLOCK) {
-            asm!("tilezero tmm0", "tilezero tmm1", "tilezero tmm2", "tilezero tmm3", options(nostack, nomem));
-            let right = b.data.as_ptr().add(j0);
-            for qb in 0..kp / INNER {
-                let a0 = a.base.add(qb * a.q_step);
-                let b0 = right.add(qb * 16 * np);
-                asm!(
-                    "tileloadd tmm4, [{a0} + {sa}*1]",
-                    "tileloadd tmm5, [{a1} + {sa}*1]",
-                    "tileloadd tmm6, [{b0} + {sb}*1]",
-                    "tileloadd tmm7, [{b1} + {sb}*1]",
-                    "tdpbf16ps tmm0, tmm4, tmm6",
-                    "tdpbf16ps tmm1, tmm4, tmm7",
-                    "tdpbf16ps tmm2, tmm5, tmm6",
-                    "tdpbf16ps tmm3, tmm5, tmm7",
-                    a0 = in(reg) a0,
-                    a1 = in(reg) a0.add(a.half_step),
-                    b0 = in(reg) b0,
-                    b1 = in(reg) b0.add(16),
-                    sa = in(reg) a.stride,
-                    sb = in(reg) b_stride,
-                    options(nostack, readonly),
-                );
-            }
-            let cols = BLOCK.min(n - j0);
-            // A whole block that replaces its destination is stored there directly.
-            let direct = !accumulate && rows == BLOCK && cols == BLOCK;
-            let (o, s) = if direct {
-                (dst.as_mut_ptr().add(j0), (n * 4) as isize)
-            } else {
-                (out.as_mut_ptr(), out_stride)
-            };
-            let row_16 = if direct { 16 * n } else { 16 * BLOCK };
-            asm!(
-                "tilestored [{o0} + {s}*1], tmm0",
-                "tilestored [{o1} + {s}*1], tmm1",
-                "tilestored [{o2} + {s}*1], tmm2",
-                "tilestored [{o3} + {s}*1], tmm3",
-                o0 = in(reg) o,
-                o1 = in(reg) o.add(16),
-                o2 = in(reg) o.add(row_16),
-                o3 = in(reg) o.add(row_16 + 16),
-                s = in(reg) s,
-                options(nostack),
-            );
-            if direct {
-                continue;
-            }
-            for r in 0..rows {
-                let d = &mut dst[r * n + j0..r * n + j0 + cols];
-                let src = &out[r * BLOCK..r * BLOCK + cols];
-                if accumulate {
-                    d.iter_mut().zip(src).for_each(|(d, &s)| *d += s);
-                } else {
-                    d.copy_from_slice(src);
-                }
-            }
-        }
-        asm!("tilerelease", options(nostack, nomem));
-    }
-}
-
-#[cfg(not(target_arch = "x86_64"))]
-unsafe fn block_row(_: &mut [f32], _: usize, _: LeftTiles, _: &PackedRight, _: bool) {
-    unreachable!("bf16_matmul_available is false off x86-64")
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -882,7 +850,7 @@ mod tests {
         }
         let block: [u32; 256] = std::array::from_fn(|i| i as u32);
         let mut out = vec![0u32; 16 * 20];
-        // SAFETY: AVX-512F is present where AMX is; `out` holds 16 rows of 20 words.
+        // SAFETY: AVX-512F is present where a bf16 kernel is; `out` holds 16 rows of 20 words.
         unsafe { transpose16(&block, out.as_mut_ptr(), 20) };
         for r in 0..16 {
             for c in 0..16 {
@@ -892,15 +860,21 @@ mod tests {
         }
     }
 
-    /// Products of small integers are exact in bf16 and in f32: the tiles must give the f32
+    /// Products of small integers are exact in bf16 and in f32: every kernel must give the f32
     /// product bit for bit, whatever the shape's padding (odd sizes), the transposes, and with
     /// accumulation.
     #[test]
     fn exact_inputs_give_the_f32_product_bit_for_bit() {
         if !bf16_matmul_available() {
-            eprintln!("no AMX bf16 on this machine: the tile kernel is not exercised");
+            eprintln!("no AMX or AVX-512 BF16 on this machine: no bf16 kernel is exercised");
             return;
         }
+        for kernel in kernels_here() {
+            exact_inputs_on(kernel);
+        }
+    }
+
+    fn exact_inputs_on(kernel: Bf16Kernel) {
         for &(m, k, n) in
             &[(1, 16, 16), (33, 47, 17), (64, 64, 64), (64, 200, 48), (100, 300, 70), (5, 1000, 40)]
         {
@@ -920,21 +894,27 @@ mod tests {
                     drop(PackedRight::new(MatRef::new(&vec![f32::NAN; kp * np], Shape::new(kp, np))));
                     let (mut want, mut got) = (c0.clone(), c0.clone());
                     gemm(&mut want, av, bv, accumulate);
-                    gemm_bf16(&mut got, av, &PackedRight::new(bv), accumulate);
-                    assert_eq!(got, want, "{m}×{k}×{n} ta {ta} tb {tb} accumulate {accumulate}");
+                    gemm_bf16_on(kernel, &mut got, av, &PackedRight::new(bv), accumulate);
+                    assert_eq!(got, want, "{kernel:?} {m}×{k}×{n} ta {ta} tb {tb} accumulate {accumulate}");
                 }
             }
         }
     }
 
     /// General inputs: within bf16's rounding of the factors (relative 2^-8 each), and the same
-    /// bits computed whole, in row blocks, and on one thread or many.
+    /// bits computed whole, in row blocks, and on one thread or many, on every kernel.
     #[test]
     fn general_inputs_are_close_and_do_not_depend_on_the_split() {
         if !bf16_matmul_available() {
-            eprintln!("no AMX bf16 on this machine: the tile kernel is not exercised");
+            eprintln!("no AMX or AVX-512 BF16 on this machine: no bf16 kernel is exercised");
             return;
         }
+        for kernel in kernels_here() {
+            general_inputs_on(kernel);
+        }
+    }
+
+    fn general_inputs_on(kernel: Bf16Kernel) {
         let (m, k, n) = (300, 256, 96);
         let (a, b) = (lcg(4, m * k, 2.0), lcg(5, k * n, 2.0));
         let (av, bv) = (MatRef::new(&a, Shape::new(m, k)), MatRef::new(&b, Shape::new(k, n)));
@@ -942,31 +922,30 @@ mod tests {
         gemm(&mut want, av, bv, false);
         let packed = PackedRight::new(bv);
         let mut whole = vec![0.0; m * n];
-        gemm_bf16(&mut whole, av, &packed, false);
+        gemm_bf16_on(kernel, &mut whole, av, &packed, false);
         // |error| ≤ Σ |a||b| · 2 · 2^-8 (each factor's rounding), with room for the f32 sums.
         for i in 0..m {
             for j in 0..n {
                 let bound: f32 =
                     (0..k).map(|kk| (a[i * k + kk] * b[kk * n + j]).abs()).sum::<f32>() * 2.0 / 256.0;
                 let (w, g) = (want[i * n + j], whole[i * n + j]);
-                assert!((w - g).abs() <= bound * 1.01 + 1e-6, "({i},{j}): {g} vs {w}, bound {bound}");
+                assert!(
+                    (w - g).abs() <= bound * 1.01 + 1e-6,
+                    "{kernel:?} ({i},{j}): {g} vs {w}, bound {bound}"
+                );
             }
         }
         let mut blocks = vec![0.0; m * n];
         for start in (0..m).step_by(70) {
             let rows = 70.min(m - start);
-            gemm_bf16_single_thread(
-                &mut blocks[start * n..(start + rows) * n],
-                av.row_range(start, rows),
-                &packed,
-                false,
-            );
+            let block = &mut blocks[start * n..(start + rows) * n];
+            gemm_rows(block, av.row_range(start, rows), &packed, false, None, kernel);
         }
-        assert_eq!(blocks, whole);
+        assert_eq!(blocks, whole, "{kernel:?}");
         let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
         let mut single = vec![0.0; m * n];
-        one.install(|| gemm_bf16(&mut single, av, &packed, false));
-        assert_eq!(single, whole);
+        one.install(|| gemm_bf16_on(kernel, &mut single, av, &packed, false));
+        assert_eq!(single, whole, "{kernel:?}");
     }
 
     /// `xᵀ` packed block by block while `x·W` is multiplied (as a layer's forward packs it, into
@@ -975,7 +954,7 @@ mod tests {
     #[test]
     fn xt_packed_by_row_blocks_is_xt_packed_whole() {
         if !bf16_matmul_available() {
-            eprintln!("no AMX bf16 on this machine: the tile kernel is not exercised");
+            eprintln!("no AMX or AVX-512 BF16 on this machine: no bf16 kernel is exercised");
             return;
         }
         for &(rows, cols, n, block) in &[(1100, 40, 24, 256), (300, 100, 33, 64), (64, 33, 16, 32)] {
@@ -995,7 +974,7 @@ mod tests {
             }
             gemm_bf16(&mut xw_alone, xv, &w, false);
             assert_eq!(xw, xw_alone, "{rows}×{cols}: the product changed");
-            // SAFETY: AVX-512F is present where AMX is.
+            // SAFETY: AVX-512F is present where a bf16 kernel is.
             let whole = unsafe { PackedLeft::new(xv.t(), rows.next_multiple_of(INNER)) };
             assert!(by_blocks.data[..] == whole.data[..], "{rows}×{cols} in blocks of {block}");
             let (mut want, mut got) = (vec![1.0; cols * n], vec![1.0; cols * n]);

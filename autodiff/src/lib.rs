@@ -36,7 +36,7 @@ mod shape;
 mod tape;
 mod tensor;
 
-pub use bf16::{MatmulPrecision, bf16_matmul_available};
+pub use bf16::{Bf16Kernel, MatmulPrecision, bf16_kernel, bf16_matmul_available};
 pub use ops::Activation;
 pub use params::{ParamId, ParamInfo, ParamStore};
 pub use pool::Pool;

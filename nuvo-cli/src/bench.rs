@@ -37,7 +37,7 @@ pub struct BenchArgs {
     /// `step`: the mesh to sample.
     #[arg(long, default_value = "assets/stanford-bunny.obj")]
     mesh: std::path::PathBuf,
-    /// `step`, `mlp`: the networks' arithmetic (`training.matmul`): `f32`, or `bf16` on AMX tiles.
+    /// `step`, `mlp`: the networks' arithmetic (`training.matmul`): `f32`, or `bf16` on AMX tiles or AVX-512 BF16.
     #[arg(long, value_parser = ["f32", "bf16"], default_value = "f32")]
     matmul: String,
     /// `step`: time the steps of a trained run instead (its folder or checkpoint; its stored config,

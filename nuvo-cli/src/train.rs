@@ -160,14 +160,14 @@ pub(crate) fn restore_run(
 
 /// Says what `training.matmul` asked for when it is not f32, and whether this CPU runs it.
 pub(crate) fn report_matmul(trainer: &Trainer) {
-    use nuvo_autodiff::MatmulPrecision;
-    match (trainer.config().training.matmul, trainer.matmul_precision()) {
-        (MatmulPrecision::Bf16, MatmulPrecision::Bf16) => {
-            println!("matmul: bf16 factors, f32 accumulation, on AMX tiles (training.matmul)")
+    use nuvo_autodiff::{MatmulPrecision, bf16_kernel};
+    match (trainer.config().training.matmul, trainer.matmul_precision(), bf16_kernel()) {
+        (MatmulPrecision::Bf16, MatmulPrecision::Bf16, Some(kernel)) => {
+            println!("matmul: bf16 factors, f32 accumulation, on {} (training.matmul)", kernel.describe())
         }
-        (MatmulPrecision::Bf16, _) => eprintln!(
-            "warning: training.matmul = \"bf16\" needs a CPU with AMX-BF16 (and a kernel that grants it); \
-             this one trains in f32"
+        (MatmulPrecision::Bf16, _, _) => eprintln!(
+            "warning: training.matmul = \"bf16\" needs a CPU with AMX-BF16 (and a kernel that grants it) \
+             or AVX-512 BF16; this one trains in f32"
         ),
         _ => {}
     }

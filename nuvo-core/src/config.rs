@@ -164,7 +164,8 @@ pub struct TrainingConfig {
     pub stop_when_settled: Option<f32>,
     /// Arithmetic of the networks' products while training: `"f32"` (the default) or `"bf16"`,
     /// factors rounded to bfloat16 and accumulated in f32 on the AMX tiles of CPUs that have them
-    /// (Intel Xeon since Sapphire Rapids), f32 elsewhere (the run says which when it starts).
+    /// (Intel Xeon since Sapphire Rapids) or on AVX-512 BF16 (AMD Zen 4 and later), f32
+    /// elsewhere (the run says which when it starts).
     /// Faster; the atlas differs from an f32 run's as another seed's would (BENCHMARKS.md). The
     /// bake always evaluates the networks in f32. Not in the paper.
     pub matmul: MatmulPrecision,
