@@ -77,7 +77,8 @@ pub(crate) const MIN_SIDE: usize = 16;
 
 /// Output rows and columns of one block of tiles.
 const BLOCK: usize = 32;
-/// The inner dimension consumed by one `TDPBF16PS`, in bf16 elements.
+/// The inner dimension of one block of the packed factors, in bf16 elements: what one
+/// `TDPBF16PS` consumes, 16 `VDPBF16PS` steps of a pair each.
 const INNER: usize = 32;
 
 mod amx;
