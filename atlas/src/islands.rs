@@ -75,7 +75,11 @@
 //!   packing"): spot's own 13 charts 0.619 → 0.696 at 1024² (gutter 2). The bisection's best
 //!   packing is then improved by a short search over island orders (`search_orders`,
 //!   [`IslandPacking::search`] attempts, [`ORDER_SEARCH`] in `nuvo unwrap`'s layout): neighbours
-//!   in the order swapped, kept when the packing fits 1% larger.
+//!   in the order swapped, kept when the packing fits 1% larger. Then (with the order search)
+//!   by a search over the places of the order's first, large islands (`search_places`,
+//!   `shapes::pack_shapes_searched`): each may take its rule's first place in another
+//!   orientation, a few times along a path, the rest placed as before; kept 0.3% larger at a
+//!   time, within [`PLACE_SEARCH_BUDGET`] placements searched.
 //! - **Efficiency**: the summed unsigned UV area of all faces in the output (over the unit
 //!   square's area 1), as [`crate::partuv`] measures packing efficiency.
 //!
@@ -929,8 +933,63 @@ fn best_shapes(
     }
     let (scale, placed, attempt) = best;
     let start = orders.attempts[attempt].clone();
-    Some(search_orders(islands, res, gutter, rotate, (scale, placed), start, search))
+    let (best, order, rule) = search_orders(islands, res, gutter, rotate, (scale, placed), start, search);
+    Some(search_places(islands, res, gutter, rotate, best, &order, rule, search))
 }
+
+/// The packing `best` of the order search, raised [`PLACE_SEARCH_STEP`] at a time while
+/// [`shapes::pack_shapes_searched`] finds a packing of the search's last `order` by its last
+/// `rule` at the next scale: first with one departure from the rule's choice, then two, up to
+/// [`PLACE_SEARCH`]'s; all of it within [`PLACE_SEARCH_BUDGET`] footprint placements searched.
+/// Nothing without the order search (`search == 0`: the necks pass's trial layouts) or beyond
+/// [`SEARCH_UP_TO`] islands. Measured on re-bakes of the 14 Common Shapes checkpoints
+/// (BENCHMARKS.md, "The large islands' places searched"): packing efficiency 0.6800 → 0.6902,
+/// charts and Editability unchanged, the pack phase 0.43 → 1.05 s a mesh.
+#[allow(clippy::too_many_arguments)]
+fn search_places(
+    islands: &[Island],
+    res: u32,
+    gutter: u32,
+    rotate: bool,
+    mut best: (f64, Vec<ShapePlaced>),
+    order: &[usize],
+    rule: Rule,
+    search: usize,
+) -> (f64, Vec<ShapePlaced>) {
+    if search == 0 || islands.len() < 2 || islands.len() > SEARCH_UP_TO {
+        return best;
+    }
+    let mut budget = PLACE_SEARCH_BUDGET;
+    'scales: while budget > 0 {
+        let target = best.0 * (1.0 + PLACE_SEARCH_STEP);
+        let fps = shapes::footprints(islands, |i: &Island| i.texels_per_unit(target, res), rotate);
+        for discrepancies in 1..=PLACE_SEARCH.discrepancies {
+            let limits = shapes::SearchLimits { discrepancies, ..PLACE_SEARCH };
+            if let Some(placed) =
+                shapes::pack_shapes_searched(&fps, order, res, gutter, rule, limits, &mut budget)
+            {
+                best = (target, placed);
+                continue 'scales;
+            }
+        }
+        break;
+    }
+    best
+}
+
+/// How far [`search_places`] looks at each scale: the places of the first 6 islands of the
+/// order (where the packings at the largest scale fail: the third to seventh island on the
+/// Common Shapes atlases), each in up to 6 orientations, at most 3 of them away from the
+/// rule's choice.
+const PLACE_SEARCH: shapes::SearchLimits = shapes::SearchLimits { depth: 6, width: 6, discrepancies: 3 };
+
+/// The relative rise of the scale at each step of `search_places`: finer than the order
+/// search's [`SEARCH_STEP`], as each step's search is dearer and its gain smaller.
+pub const PLACE_SEARCH_STEP: f64 = 0.003;
+
+/// Footprint placements (`best_fit` calls) `search_places` may search in all: about 0.6 s
+/// of a 2048² atlas on 2 cores (BENCHMARKS.md).
+pub const PLACE_SEARCH_BUDGET: usize = 10_000;
 
 /// Packing attempts of the order search (`search_orders`) in `nuvo unwrap`'s final layout.
 /// Re-bakes of the 14 Common Shapes checkpoints (BENCHMARKS.md, "An order search after the
@@ -963,10 +1022,10 @@ fn search_orders(
     best: (f64, Vec<ShapePlaced>),
     start: (Rule, Vec<usize>),
     attempts: usize,
-) -> (f64, Vec<ShapePlaced>) {
+) -> ((f64, Vec<ShapePlaced>), Vec<usize>, Rule) {
     let (mut rule, mut order) = start;
     if attempts == 0 || islands.len() < 2 || islands.len() > SEARCH_UP_TO {
-        return best;
+        return (best, order, rule);
     }
     let footprints =
         |scale: f64| shapes::footprints(islands, |i: &Island| i.texels_per_unit(scale, res), rotate);
@@ -990,7 +1049,7 @@ fn search_orders(
             fps = footprints(target);
         }
     }
-    best
+    (best, order, rule)
 }
 
 /// The placement rules and island orders [`best_shapes`] tries, in turn (its docs).
