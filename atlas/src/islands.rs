@@ -117,7 +117,8 @@ pub struct IslandPacking {
     /// Whether islands may be rotated (to their minimum-area bounding rectangle, then by 90°).
     pub rotate: bool,
     /// Packing attempts of the order search after the shape packer's bisection (module docs,
-    /// [`ORDER_SEARCH`]); 0 for none (the necks pass's trial layouts: see there).
+    /// [`ORDER_SEARCH`]), which the search over the large islands' places follows
+    /// ([`PLACE_SEARCH_BUDGET`]); 0 for neither (the necks pass's trial layouts: see there).
     pub search: usize,
 }
 
