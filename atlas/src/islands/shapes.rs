@@ -525,20 +525,10 @@ pub(super) fn pack_shapes(
     gutter: u32,
     rule: Rule,
 ) -> Option<Vec<ShapePlaced>> {
-    let mut occupancy = Occupancy::new(side, gutter);
-    let mut out: Vec<Option<ShapePlaced>> = vec![None; footprints.len()];
-    for &i in order {
-        let occ = &occupancy;
-        let (_, k, x, y) = footprints[i]
-            .par_iter()
-            .enumerate()
-            .filter_map(|(k, fp)| occ.best_fit(fp, rule).map(|(key, x, y)| ((key, k), k, x, y)))
-            .min_by_key(|(key, ..)| *key)?;
-        let footprint = footprints[i][k].clone();
-        occupancy.occupy(&footprint, x, y, gutter);
-        out[i] = Some(ShapePlaced { x, y, footprint });
-    }
-    out.into_iter().collect()
+    // The search's first path without a departure is the greedy placement itself.
+    let greedy = SearchLimits { depth: 0, width: 1, discrepancies: 0 };
+    let mut unlimited = usize::MAX;
+    pack_shapes_searched(footprints, order, side, gutter, rule, greedy, &mut unlimited)
 }
 
 /// [`pack_shapes`] with a limited discrepancy search (Harvey & Ginsberg, "Limited Discrepancy
@@ -1030,15 +1020,8 @@ mod tests {
                 let greedy = pack_shapes(&fps, &order, side, gutter, rule);
                 for discrepancies in [0, 2] {
                     let limits = SearchLimits { depth: 3, width: 2, discrepancies };
-                    let searched = pack_shapes_searched(
-                        &fps,
-                        &order,
-                        side,
-                        gutter,
-                        rule,
-                        limits,
-                        &mut usize::MAX.clone(),
-                    );
+                    let searched =
+                        pack_shapes_searched(&fps, &order, side, gutter, rule, limits, &mut usize::MAX);
                     match (&greedy, &searched) {
                         (Some(g), Some(s)) => assert_eq!(spots(g), spots(s)),
                         (None, None) => {}
