@@ -1020,8 +1020,9 @@ mod tests {
                 let greedy = pack_shapes(&fps, &order, side, gutter, rule);
                 for discrepancies in [0, 2] {
                     let limits = SearchLimits { depth: 3, width: 2, discrepancies };
+                    let mut unlimited = usize::MAX;
                     let searched =
-                        pack_shapes_searched(&fps, &order, side, gutter, rule, limits, &mut usize::MAX);
+                        pack_shapes_searched(&fps, &order, side, gutter, rule, limits, &mut unlimited);
                     match (&greedy, &searched) {
                         (Some(g), Some(s)) => assert_eq!(spots(g), spots(s)),
                         (None, None) => {}
