@@ -957,13 +957,13 @@ fn search_places(
     rule: Rule,
     search: usize,
 ) -> (f64, Vec<ShapePlaced>) {
-    if search == 0 || islands.len() < 2 || islands.len() > SEARCH_UP_TO {
+    if !searches(islands, search) {
         return best;
     }
     let mut budget = PLACE_SEARCH_BUDGET;
     'scales: while budget > 0 {
         let target = best.0 * (1.0 + PLACE_SEARCH_STEP);
-        let fps = shapes::footprints(islands, |i: &Island| i.texels_per_unit(target, res), rotate);
+        let fps = footprints_at(islands, target, res, rotate);
         for discrepancies in 1..=PLACE_SEARCH.discrepancies {
             let limits = shapes::SearchLimits { discrepancies, ..PLACE_SEARCH };
             if let Some(placed) =
@@ -976,6 +976,17 @@ fn search_places(
         break;
     }
     best
+}
+
+/// Whether the searches after the bisection run: with `attempts` asked for and 2 to
+/// [`SEARCH_UP_TO`] islands.
+fn searches(islands: &[Island], attempts: usize) -> bool {
+    attempts > 0 && (2..=SEARCH_UP_TO).contains(&islands.len())
+}
+
+/// The islands' footprints at atlas scale `scale` (the shape packings' input).
+fn footprints_at(islands: &[Island], scale: f64, res: u32, rotate: bool) -> Vec<Vec<shapes::Footprint>> {
+    shapes::footprints(islands, |i: &Island| i.texels_per_unit(scale, res), rotate)
 }
 
 /// How far [`search_places`] looks at each scale: the places of the first 6 islands of the
@@ -1026,11 +1037,10 @@ fn search_orders(
     attempts: usize,
 ) -> ((f64, Vec<ShapePlaced>), Vec<usize>, Rule) {
     let (mut rule, mut order) = start;
-    if attempts == 0 || islands.len() < 2 || islands.len() > SEARCH_UP_TO {
+    if !searches(islands, attempts) {
         return (best, order, rule);
     }
-    let footprints =
-        |scale: f64| shapes::footprints(islands, |i: &Island| i.texels_per_unit(scale, res), rotate);
+    let footprints = |scale: f64| footprints_at(islands, scale, res, rotate);
     let mut best = best;
     let mut state = 0x9e37_79b9_7f4a_7c15u64;
     let mut draw = |n: usize| {
@@ -1089,7 +1099,7 @@ impl ShapeOrders {
         gutter: u32,
         rotate: bool,
     ) -> Option<(usize, Vec<ShapePlaced>)> {
-        let fps = shapes::footprints(islands, |i: &Island| i.texels_per_unit(scale, res), rotate);
+        let fps = footprints_at(islands, scale, res, rotate);
         self.attempts.iter().enumerate().find_map(|(k, (rule, order))| {
             shapes::pack_shapes(&fps, order, res, gutter, *rule).map(|p| (k, p))
         })
