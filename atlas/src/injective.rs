@@ -144,15 +144,15 @@
 //!   the output, read by UVs as the later steps read them: a part that would join another
 //!   along a shared edge (congruent faces mapped alike) is moved beside it (`unstacked`).
 //!
-//! Islands are processed in parallel, largest first (`largest_first`); inside an island, the
+//! Islands are processed in parallel, dearest first (`dearest_first`, `Prepared::class`); inside an island, the
 //! per-face work of SLIM (its weights and rotations, energies, injectivity angles, step bounds,
 //! the system's slots) runs in parallel too, in tasks of at least [`FACES_PER_TASK`] faces, each
 //! face's value computed alone and every sum, minimum and assembly then taken sequentially in
 //! face order, as before. So the result does not depend on the thread count, and is the same
 //! bits as a sequential solve. The sparse factorisations stay sequential (`Pattern`).
 
-use std::sync::OnceLock;
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Mutex, OnceLock};
 
 use foldhash::{HashMap, HashMapExt, HashSet, HashSetExt};
 
@@ -433,8 +433,19 @@ pub fn make_injective_where(
     let count = members.len();
     let degenerate = degenerate_3d_faces(mesh);
     let ctx = Ctx { mesh, uv, degenerate: &degenerate, opts };
-    let island = |faces: &[u32]| if solve(faces) { ctx.island(faces) } else { IslandResult::kept(faces) };
-    let results = largest_first(&members, island);
+    // Every island read and checked first, in parallel, so that the dearest go first (below).
+    let prepared: Vec<(&[u32], Option<Prepared>)> = members
+        .par_iter()
+        .map(|faces| (faces.as_slice(), solve(faces).then(|| ctx.prepare(faces))))
+        .collect();
+    let results = dearest_first(
+        prepared,
+        |(faces, p)| (p.as_ref().map_or(0, Prepared::class), faces.len()),
+        |(faces, p)| match p {
+            Some(p) => ctx.island(p),
+            None => IslandResult::kept(faces),
+        },
+    );
 
     let mut report = InjectiveReport { islands_before: count, ..Default::default() };
     let (mut parts_faces, mut parts_corners) = (Vec::new(), Vec::new());
@@ -529,27 +540,32 @@ fn unstacked(
     layer_of(corners)
 }
 
-/// `island` of every island, in the islands' order, computed in parallel with the islands taken
-/// largest first (most faces; ties in order) from one queue by as many workers as the pool has
-/// threads. Why: the islands' parallel map split the list in halves, so the largest island was
-/// often started last and solved alone, one core idle (the README bunny's `injective` phase:
-/// one thread idle 1.3 s of 3.1 s); largest first, the small islands fill the gaps at the end.
-/// Each result depends on its island alone, so the order of work changes no bit of the output.
-/// Faces are only a proxy for work (that bunny's 9,783-face island took 1.64 s, its 16,582-face
-/// one 0.55 s: cone cuts and rounds), so the last island can still run alone.
-fn largest_first<R: Send + Sync>(islands: &[Vec<u32>], island: impl Fn(&[u32]) -> R + Sync) -> Vec<R> {
-    let mut queue: Vec<usize> = (0..islands.len()).collect();
-    queue.sort_by_key(|&i| std::cmp::Reverse(islands[i].len()));
+/// `work` of every item, in the items' order, computed in parallel with the items taken by
+/// decreasing `cost` (ties in order) from one queue by as many workers as the pool has threads.
+/// Why: a parallel map over the list splits it in halves, so the dearest island was often
+/// started last and solved alone, one core idle (the README bunny's `injective` phase: one
+/// thread idle 1.3 s of 3.1 s); dearest first, the cheap islands fill the gaps at the end. Each
+/// result depends on its item alone, so the order of work changes no bit of the output.
+fn dearest_first<T: Send, K: Ord, R: Send + Sync>(
+    items: Vec<T>,
+    cost: impl Fn(&T) -> K,
+    work: impl Fn(T) -> R + Sync,
+) -> Vec<R> {
+    let mut queue: Vec<usize> = (0..items.len()).collect();
+    // Stable: equal costs keep their order.
+    queue.sort_by_key(|&i| std::cmp::Reverse(cost(&items[i])));
+    let cells: Vec<Mutex<Option<T>>> = items.into_iter().map(|t| Mutex::new(Some(t))).collect();
     let next = AtomicUsize::new(0);
-    let done: Vec<OnceLock<R>> = islands.iter().map(|_| OnceLock::new()).collect();
-    let workers = rayon::current_num_threads().min(islands.len());
+    let done: Vec<OnceLock<R>> = cells.iter().map(|_| OnceLock::new()).collect();
+    let workers = rayon::current_num_threads().min(cells.len());
     (0..workers).into_par_iter().with_max_len(1).for_each(|_| {
         while let Some(&i) = queue.get(next.fetch_add(1, Ordering::Relaxed)) {
-            // Each index is taken once, so each cell is set once.
-            let _ = done[i].set(island(&islands[i]));
+            // Each index is taken once, so each item is taken and each cell set once.
+            let item = cells[i].lock().unwrap_or_else(|e| e.into_inner()).take().expect("taken once");
+            let _ = done[i].set(work(item));
         }
     });
-    done.into_iter().map(|cell| cell.into_inner().expect("every island is taken")).collect()
+    done.into_iter().map(|cell| cell.into_inner().expect("every item is taken")).collect()
 }
 
 /// The inputs every island reads.
@@ -613,8 +629,36 @@ struct PartResult {
     sided: bool,
 }
 
+/// An island read and checked, not yet solved: what [`Ctx::island`] starts from, and what
+/// tells the dear islands from the cheap ones before any is solved.
+struct Prepared {
+    patch: Patch,
+    placement: Placement,
+    /// Its input map, where it has one.
+    start: Option<Vec<[f64; 2]>>,
+    injective_before: bool,
+    energy_before: Option<(f64, f64)>,
+}
+
+impl Prepared {
+    /// How dear the island is to solve, by what it will take (the module's steps), highest
+    /// first: 3 cut open and embedded anew (not injective, not a disc), 2 embedded anew or
+    /// mended (not injective), 1 relaxed from its own map (injective). Within a class the
+    /// faces rank (`dearest_first`'s key). Why: a re-embedding's SLIM starts far from its
+    /// optimum and takes 3–20 times the rounds of a relaxation (the Common Shapes bunny: a
+    /// 10k-face island cut open took 98 rounds and 0.71 s, a 12k-face injective one 5 rounds
+    /// and 0.07 s), so faces alone started the dearest island third and it ran alone at the end.
+    fn class(&self) -> u8 {
+        match (self.injective_before, self.patch.topology.disc) {
+            (true, _) => 1,
+            (false, true) => 2,
+            (false, false) => 3,
+        }
+    }
+}
+
 impl Ctx<'_> {
-    fn island(&self, faces: &[u32]) -> IslandResult {
+    fn prepare(&self, faces: &[u32]) -> Prepared {
         let patch = Patch::new(self, faces);
         let placement = Placement::of(self, faces, &patch);
         let start = patch.current(self);
@@ -624,6 +668,11 @@ impl Ctx<'_> {
         } else {
             None
         };
+        Prepared { patch, placement, start, injective_before, energy_before }
+    }
+
+    fn island(&self, prepared: Prepared) -> IslandResult {
+        let Prepared { patch, placement, start, injective_before, energy_before } = prepared;
         let disc = patch.topology.disc;
         let mut parts = Vec::new();
         self.solve(patch, start, &placement, &mut parts);
@@ -4180,10 +4229,10 @@ mod tests {
         TriMesh { positions, uv: Some(UvLayer { coords, triangles: triangles.clone() }), triangles }
     }
 
-    /// Islands are taken largest first, but each result lands at its island's place, computed
-    /// once: as a sequential map in order gives them.
+    /// Items are taken dearest first, but each result lands at its item's place, computed once:
+    /// as a sequential map in order gives them.
     #[test]
-    fn largest_first_returns_every_island_in_its_place() {
+    fn dearest_first_returns_every_item_in_its_place() {
         let sizes = [3usize, 40, 1, 40, 7, 0, 12, 5, 90, 2];
         let islands: Vec<Vec<u32>> = sizes
             .iter()
@@ -4191,7 +4240,7 @@ mod tests {
             .map(|(i, &n)| (0..n as u32).map(|f| 1000 * i as u32 + f).collect())
             .collect();
         let calls = AtomicUsize::new(0);
-        let got = largest_first(&islands, |faces| {
+        let got = dearest_first(islands.clone(), Vec::len, |faces| {
             calls.fetch_add(1, Ordering::Relaxed);
             (faces.len(), faces.first().copied())
         });
@@ -4199,7 +4248,7 @@ mod tests {
             islands.iter().map(|f| (f.len(), f.first().copied())).collect();
         assert_eq!(got, expected);
         assert_eq!(calls.load(Ordering::Relaxed), islands.len());
-        assert!(largest_first(&[], |f: &[u32]| f.len()).is_empty());
+        assert!(dearest_first(Vec::<Vec<u32>>::new(), Vec::len, |f| f.len()).is_empty());
     }
 
     /// Two islands, one large enough that SLIM's per-face loops split into several tasks
