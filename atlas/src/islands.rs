@@ -1047,19 +1047,48 @@ fn search_orders(
         state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
         (state >> 33) as usize % n
     };
+    // Each attempt's swap and rule, drawn up front: the draws do not depend on what fits.
+    let n = order.len();
+    let moves: Vec<(usize, usize, Option<Rule>)> = (0..attempts)
+        .map(|_| {
+            let i = draw(n);
+            let j = (i + 1 + draw(3)).min(n - 1);
+            let r = (draw(4) == 0).then(|| [Rule::LowestTop, Rule::Corner, Rule::Square][draw(3)]);
+            (i, j, r)
+        })
+        .collect();
     let mut target = best.0 * (1.0 + SEARCH_STEP);
     let mut fps = footprints(target);
-    for _ in 0..attempts {
-        let mut candidate = order.clone();
-        let i = draw(candidate.len());
-        let j = (i + 1 + draw(3)).min(candidate.len() - 1);
+    let attempt = |order: &[usize],
+                   rule: Rule,
+                   fps: &[Vec<shapes::Footprint>],
+                   (i, j, r): (usize, usize, Option<Rule>)| {
+        let mut candidate = order.to_vec();
         candidate.swap(i, j);
-        let r = if draw(4) == 0 { [Rule::LowestTop, Rule::Corner, Rule::Square][draw(3)] } else { rule };
-        if let Some(placed) = shapes::pack_shapes(&fps, &candidate, res, gutter, r) {
+        let r = r.unwrap_or(rule);
+        shapes::pack_shapes(fps, &candidate, res, gutter, r).map(|placed| (placed, candidate, r))
+    };
+    let mut a = 0;
+    while a < moves.len() {
+        // Two attempts at once: the second from the same packing, as the sequential search
+        // makes it when the first does not fit (most do not); when the first fits, the second
+        // is made again from the new packing. Same result as one at a time.
+        let (first, second) = match moves.get(a + 1) {
+            Some(&next) => {
+                rayon::join(|| attempt(&order, rule, &fps, moves[a]), || attempt(&order, rule, &fps, next))
+            }
+            None => (attempt(&order, rule, &fps, moves[a]), None),
+        };
+        let (taken, fitted) = match (first, second) {
+            (Some(fitted), _) => (1, Some(fitted)),
+            (None, second) => (2, second),
+        };
+        if let Some((placed, candidate, r)) = fitted {
             (best, order, rule) = ((target, placed), candidate, r);
             target = best.0 * (1.0 + SEARCH_STEP);
             fps = footprints(target);
         }
+        a += taken;
     }
     (best, order, rule)
 }
@@ -1100,8 +1129,19 @@ impl ShapeOrders {
         rotate: bool,
     ) -> Option<(usize, Vec<ShapePlaced>)> {
         let fps = footprints_at(islands, scale, res, rotate);
-        self.attempts.iter().enumerate().find_map(|(k, (rule, order))| {
+        let attempt = |k: usize| {
+            let (rule, order) = &self.attempts[k];
             shapes::pack_shapes(&fps, order, res, gutter, *rule).map(|p| (k, p))
+        };
+        // Two attempts at once, the first that fits in order kept: the second core, which each
+        // island's placement (4–8 orientations) keeps only partly busy, tries the next attempt.
+        (0..self.attempts.len()).step_by(2).find_map(|k| {
+            if k + 1 < self.attempts.len() {
+                let (a, b) = rayon::join(|| attempt(k), || attempt(k + 1));
+                a.or(b)
+            } else {
+                attempt(k)
+            }
         })
     }
 }
