@@ -298,17 +298,43 @@ pub fn cut_necks(mesh: &TriMesh, opts: &NeckOptions) -> Result<Necked, AtlasErro
         // the islands the trial prepared.
         let (mut lo, mut step) = (rise, PROBE_STEP);
         let mut hi = None;
-        while hi.is_none_or(|h: f64| h / lo > 1.0 + PROBE_STEP) && affordable(report.trials + report.probes) {
-            let next = match hi {
-                None => lo * (1.0 + step),
-                Some(h) => (lo * h).sqrt(),
+        let trials = report.trials;
+        let goes_on = |lo: f64, hi: Option<f64>, probes: usize| {
+            hi.is_none_or(|h: f64| h / lo > 1.0 + PROBE_STEP) && affordable(trials + probes)
+        };
+        let next_of = |lo: f64, hi: Option<f64>, step: f64| match hi {
+            None => lo * (1.0 + step),
+            Some(h) => (lo * h).sqrt(),
+        };
+        while goes_on(lo, hi, report.probes) {
+            let next = next_of(lo, hi, step);
+            // The probe after this one if this one packs is packed at once (the other core
+            // was mostly idle through the probes); it counts only when this one packs, as
+            // the sequential probes would then make it next. Same probes, same result.
+            let ahead = goes_on(next, hi, report.probes + 1).then(|| next_of(next, hi, 2.0 * step));
+            let (packs, ahead) = match ahead {
+                Some(a) => {
+                    let (packs, packs_ahead) = rayon::join(
+                        || probe.packs_at(scale * next.sqrt()),
+                        || probe.packs_at(scale * a.sqrt()),
+                    );
+                    (packs, Some((a, packs_ahead)))
+                }
+                None => (probe.packs_at(scale * next.sqrt()), None),
             };
             report.probes += 1;
-            if probe.packs_at(scale * next.sqrt()) {
-                lo = next;
-                step *= 2.0;
-            } else {
+            if !packs {
                 hi = Some(next);
+                continue;
+            }
+            (lo, step) = (next, 2.0 * step);
+            if let Some((a, packs_ahead)) = ahead {
+                report.probes += 1;
+                if packs_ahead {
+                    (lo, step) = (a, 2.0 * step);
+                } else {
+                    hi = Some(a);
+                }
             }
         }
         (efficiency, scale) = (efficiency * lo, scale * lo.sqrt());
