@@ -225,17 +225,25 @@ pub fn pack_images(layout: &AtlasLayout, charts: &[RgbImage]) -> Result<RgbImage
     }
     let mut img = RgbImage::from_pixel(layout.resolution, layout.resolution, Rgb(BACKGROUND));
     let cell = layout.resolution / layout.columns;
-    for (p, chart) in layout.charts.iter().zip(charts) {
-        let [x0, y0, side] = p.texels;
-        let (cx, cy) = (x0 - layout.gutter, y0 - layout.gutter);
-        for y in cy..cy + cell {
+    // Rows in parallel (each pixel is its own chart's alone): the 2048² normal grids took tens
+    // of milliseconds on one core at the end of the bake.
+    let width = layout.resolution as usize * 3;
+    img.par_chunks_mut(width).enumerate().for_each(|(y, row)| {
+        let y = y as u32;
+        for (p, chart) in layout.charts.iter().zip(charts) {
+            let [x0, y0, side] = p.texels;
+            let (cx, cy) = (x0 - layout.gutter, y0 - layout.gutter);
+            if !(cy..cy + cell).contains(&y) {
+                continue;
+            }
+            let ly = ((y as f32 + 0.5 - y0 as f32) / side as f32).clamp(0.0, 1.0);
             for x in cx..cx + cell {
                 let lx = ((x as f32 + 0.5 - x0 as f32) / side as f32).clamp(0.0, 1.0);
-                let ly = ((y as f32 + 0.5 - y0 as f32) / side as f32).clamp(0.0, 1.0);
-                img.put_pixel(x, y, Rgb(bilinear(chart, [lx, 1.0 - ly]).map(|c| c.round() as u8)));
+                let rgb = bilinear(chart, [lx, 1.0 - ly]).map(|c| c.round() as u8);
+                row[x as usize * 3..x as usize * 3 + 3].copy_from_slice(&rgb);
             }
         }
-    }
+    });
     Ok(img)
 }
 
