@@ -96,6 +96,26 @@ fn same_seed_same_parameters_different_seed_different() {
     assert_ne!(a, param_values(&t));
 }
 
+/// The checkpoint file holds the run's last step, whether the run ends on a checkpoint step (saved
+/// there once) or between two (saved at the end).
+#[test]
+fn the_checkpoint_holds_the_last_step_on_or_between_checkpoint_steps() {
+    let dir = tempfile::tempdir().unwrap();
+    for (steps, name) in [(60, "on"), (50, "between")] {
+        let mut cfg = small("");
+        cfg.config.training.steps = steps;
+        let mut t = trainer(&cfg);
+        let out = dir.path().join(name);
+        run(&mut t, &RunOptions { out_dir: out.clone(), resume: false }, &mut Silent).unwrap();
+        let saved = Checkpoint::load(&out.join(files::CHECKPOINT)).unwrap();
+        assert_eq!(saved.step, steps, "{name}");
+        // The trainer's own state, through the same save and load (which sorts the parameters).
+        let fresh = dir.path().join(format!("{name}.safetensors"));
+        t.checkpoint().unwrap().save(&fresh).unwrap();
+        assert!(saved == Checkpoint::load(&fresh).unwrap(), "{name}: the file is not the last state");
+    }
+}
+
 #[test]
 fn a_resumed_run_matches_an_uninterrupted_one() {
     let cfg = small("");
