@@ -144,12 +144,13 @@
 //!   the output, read by UVs as the later steps read them: a part that would join another
 //!   along a shared edge (congruent faces mapped alike) is moved beside it (`unstacked`).
 //!
-//! Islands are processed in parallel, dearest first (`dearest_first`, `Prepared::class`); inside an island, the
-//! per-face work of SLIM (its weights and rotations, energies, injectivity angles, step bounds,
-//! the system's slots) runs in parallel too, in tasks of at least [`FACES_PER_TASK`] faces, each
-//! face's value computed alone and every sum, minimum and assembly then taken sequentially in
-//! face order, as before. So the result does not depend on the thread count, and is the same
-//! bits as a sequential solve. The sparse factorisations stay sequential (`Pattern`).
+//! Islands are read and checked in parallel, then solved in parallel dearest first
+//! (`dearest_first`, `Prepared::class`); inside an island, the per-face work of SLIM (its
+//! weights and rotations, energies, injectivity angles, step bounds, the system's slots) runs in
+//! parallel too, in tasks of at least [`FACES_PER_TASK`] faces, each face's value computed alone
+//! and every sum, minimum and assembly then taken sequentially in face order, as before. So the
+//! result does not depend on the thread count, and is the same bits as a sequential solve. The
+//! sparse factorisations stay sequential (`Pattern`).
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Mutex, OnceLock};
