@@ -993,7 +993,8 @@ fn footprints_at(islands: &[Island], scale: f64, res: u32, rotate: bool) -> Vec<
 /// order (where the packings at the largest scale fail: the third to seventh island on the
 /// Common Shapes atlases), each in up to 6 orientations, at most 3 of them away from the
 /// rule's choice.
-const PLACE_SEARCH: shapes::SearchLimits = shapes::SearchLimits { depth: 6, width: 6, discrepancies: 3 };
+const PLACE_SEARCH: shapes::SearchLimits =
+    shapes::SearchLimits { depth: 6, width: 6, discrepancies: 3, speculate: true };
 
 /// The relative rise of the scale at each step of `search_places`: finer than the order
 /// search's [`SEARCH_STEP`], as each step's search is dearer and its gain smaller.

@@ -527,7 +527,7 @@ pub(super) fn pack_shapes(
     rule: Rule,
 ) -> Option<Vec<ShapePlaced>> {
     // The search's first path without a departure is the greedy placement itself.
-    let greedy = SearchLimits { depth: 0, width: 1, discrepancies: 0 };
+    let greedy = SearchLimits { depth: 0, width: 1, discrepancies: 0, speculate: false };
     let mut unlimited = usize::MAX;
     pack_shapes_searched(footprints, order, side, gutter, rule, greedy, &mut unlimited)
 }
@@ -545,11 +545,11 @@ pub(super) fn pack_shapes(
 /// first, large ones (on the Common Shapes atlases the third to seventh of 17–23), so the
 /// arrangement of the large islands, which the greedy fixes one at a time, limits the packing.
 ///
-/// Two places of a searched island are searched at once (`rayon::join`), each from the budget
-/// left before them; the second's outcome is then taken as the sequential search's only when
-/// the first found nothing and the second used at most what the first left (a search with a
-/// larger budget makes the same calls up to the point where the smaller one runs out), else
-/// the budget is spent. So the result and the budget left are those of searching the places
+/// With [`SearchLimits::speculate`] two places of a searched island are searched at once
+/// (`rayon::join`), each from the budget left before them; the second's outcome is then taken
+/// as the sequential search's only when the first found nothing and the second used at most
+/// what the first left (a search with a larger budget makes the same calls up to the point
+/// where the smaller one runs out), else the budget is spent. So the result and the budget left are those of searching the places
 /// one after the other, at any thread count; the second core, which each place's own parallel
 /// search (4–8 orientations) kept only partly busy, now searches ahead. Measured on the README
 /// bunny's bake (2 Zen 5 cores): the pack phase 1.0–1.1 → 0.9 s, the teapot's 2.1–2.3 → 1.8–1.9 s,
@@ -563,22 +563,7 @@ pub(super) fn pack_shapes_searched(
     limits: SearchLimits,
     budget: &mut usize,
 ) -> Option<Vec<ShapePlaced>> {
-    searched(footprints, order, side, gutter, rule, limits, budget, true)
-}
-
-/// [`pack_shapes_searched`], its places searched two at a time (`speculate`) or one at a time.
-#[allow(clippy::too_many_arguments)]
-fn searched(
-    footprints: &[Vec<Footprint>],
-    order: &[usize],
-    side: u32,
-    gutter: u32,
-    rule: Rule,
-    limits: SearchLimits,
-    budget: &mut usize,
-    speculate: bool,
-) -> Option<Vec<ShapePlaced>> {
-    let search = Search { footprints, order, gutter, rule, limits, speculate };
+    let search = Search { footprints, order, gutter, rule, limits };
     let found = search.from(Occupancy::new(side, gutter), 0, limits.discrepancies, &[], budget)?;
     let mut out: Vec<Option<ShapePlaced>> = vec![None; footprints.len()];
     for Step { island, turn, x, y } in found {
@@ -596,6 +581,9 @@ pub(super) struct SearchLimits {
     pub width: usize,
     /// Places other than the rule's own choice along one path.
     pub discrepancies: usize,
+    /// Whether two places of a searched island are searched at once (the result and the budget
+    /// left are the same either way; tests compare the two).
+    pub speculate: bool,
 }
 
 /// One island placed on a search path: its index, orientation (index into its footprints) and
@@ -615,9 +603,6 @@ struct Search<'a> {
     gutter: u32,
     rule: Rule,
     limits: SearchLimits,
-    /// Whether two places of a searched island are searched at once (the search's result and
-    /// the budget it leaves are the same either way; tests compare the two).
-    speculate: bool,
 }
 
 impl Search<'_> {
@@ -647,7 +632,7 @@ impl Search<'_> {
         };
         let mut rank = 0;
         while rank < places.len() {
-            if !self.speculate || rank + 1 == places.len() {
+            if !self.limits.speculate || rank + 1 == places.len() {
                 if let Some(found) = child(rank, budget) {
                     return Some(found);
                 }
@@ -1075,7 +1060,7 @@ mod tests {
             for rule in [Rule::LowestTop, Rule::Corner, Rule::Square] {
                 let greedy = pack_shapes(&fps, &order, side, gutter, rule);
                 for discrepancies in [0, 2] {
-                    let limits = SearchLimits { depth: 3, width: 2, discrepancies };
+                    let limits = SearchLimits { depth: 3, width: 2, discrepancies, speculate: true };
                     let mut unlimited = usize::MAX;
                     let searched =
                         pack_shapes_searched(&fps, &order, side, gutter, rule, limits, &mut unlimited);
@@ -1099,7 +1084,7 @@ mod tests {
         let (mut rescued, mut tried) = (0, 0);
         for _ in 0..300 {
             let (fps, order, side, gutter) = random_rects(&mut rng);
-            let limits = SearchLimits { depth: 4, width: 2, discrepancies: 2 };
+            let limits = SearchLimits { depth: 4, width: 2, discrepancies: 2, speculate: true };
             let searched =
                 pack_shapes_searched(&fps, &order, side, gutter, Rule::LowestTop, limits, &mut 1_000_000);
             if let Some(placed) = &searched {
@@ -1128,14 +1113,18 @@ mod tests {
         let mut exhausted = 0;
         for _ in 0..60 {
             let (fps, order, side, gutter) = random_rects(&mut rng);
-            let limits = SearchLimits { depth: 4, width: 3, discrepancies: 2 };
+            let one_by_one = SearchLimits { depth: 4, width: 3, discrepancies: 2, speculate: false };
+            let two_at_once = SearchLimits { speculate: true, ..one_by_one };
+            let search = |limits, budget: &mut usize| {
+                pack_shapes_searched(&fps, &order, side, gutter, Rule::LowestTop, limits, budget)
+            };
             let mut full = usize::MAX;
-            searched(&fps, &order, side, gutter, Rule::LowestTop, limits, &mut full, false);
+            search(one_by_one, &mut full);
             let needed = usize::MAX - full;
             for budget in (0..=needed + 2).step_by((needed / 25).max(1)) {
                 let (mut one, mut two) = (budget, budget);
-                let a = searched(&fps, &order, side, gutter, Rule::LowestTop, limits, &mut one, false);
-                let b = searched(&fps, &order, side, gutter, Rule::LowestTop, limits, &mut two, true);
+                let a = search(one_by_one, &mut one);
+                let b = search(two_at_once, &mut two);
                 assert_eq!(a.as_deref().map(spots), b.as_deref().map(spots), "budget {budget}");
                 assert_eq!(one, two, "budget {budget}");
                 exhausted += usize::from(one == 0);
