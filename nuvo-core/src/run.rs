@@ -148,6 +148,8 @@ pub fn run(
                 for _ in 0..summary.rollbacks {
                     trainer.halve_learning_rates();
                 }
+                // The snapshot's step again, with other learning rates than the file holds.
+                saved_at = None;
                 consecutive_bad = 0;
                 observer.note(&format!(
                     "rolled back to step {} and halved the learning rates ({} consecutive bad steps)",

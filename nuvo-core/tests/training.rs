@@ -272,6 +272,9 @@ fn a_transient_nan_burst_is_survived_by_rolling_back() {
     assert_eq!(s.rollbacks, 1);
     assert_eq!(s.steps, 60);
     assert!((t.lr_scale() - 0.5).abs() < 1e-7);
+    // The checkpoint holds the halved learning rates the run ended with.
+    let saved = Checkpoint::load(&dir.path().join(files::CHECKPOINT)).unwrap();
+    assert_eq!((saved.step, saved.lr_scale), (60, 0.5));
 }
 
 #[test]
