@@ -549,11 +549,11 @@ pub(super) fn pack_shapes(
 /// (`rayon::join`), each from the budget left before them; the second's outcome is then taken
 /// as the sequential search's only when the first found nothing and the second used at most
 /// what the first left (a search with a larger budget makes the same calls up to the point
-/// where the smaller one runs out), else the budget is spent. So the result and the budget left are those of searching the places
-/// one after the other, at any thread count; the second core, which each place's own parallel
-/// search (4–8 orientations) kept only partly busy, now searches ahead. Measured on the README
-/// bunny's bake (2 Zen 5 cores): the pack phase 1.0–1.1 → 0.9 s, the teapot's 2.1–2.3 → 1.8–1.9 s,
-/// the same atlases.
+/// where the smaller one runs out), else the budget is spent. So the result and the budget
+/// left are those of searching the places one after the other, at any thread count; the second
+/// core, which each place's own parallel search (4–8 orientations) kept only partly busy, now
+/// searches ahead. Measured on the README bunny's bake (2 Zen 5 cores): the pack phase 1.0–1.1
+/// → 0.9 s, the teapot's 2.1–2.3 → 1.8–1.9 s, the same atlases.
 pub(super) fn pack_shapes_searched(
     footprints: &[Vec<Footprint>],
     order: &[usize],
