@@ -313,6 +313,31 @@ fn next(row: &[u64], x: u32, w: u32, set: bool) -> u32 {
     }
 }
 
+/// The first set bit of `row` among `a..=b` (`a ≤ b` inside the row), if any: [`next`]'s
+/// answer to the collision test, computed as the OR of the span's words first, without a
+/// branch between them (vectorised), and searched word by word only when that is not zero.
+/// Why: most spans a search tests are free, and a footprint's row of a large island spans
+/// several words; the word-by-word loop was the hottest part of [`Occupancy::best_fit`].
+fn first_occupied(row: &[u64], a: u32, b: u32) -> Option<u32> {
+    let (i, j) = (a as usize / 64, b as usize / 64);
+    let low = !0u64 << (a % 64);
+    let high = !0u64 >> (63 - b % 64);
+    if i == j {
+        let word = row[i] & low & high;
+        return (word != 0).then(|| i as u32 * 64 + word.trailing_zeros());
+    }
+    let inner = &row[i + 1..j];
+    let any = (row[i] & low) | inner.iter().fold(0, |acc, &w| acc | w) | (row[j] & high);
+    if any == 0 {
+        return None;
+    }
+    let first = (row[i] & low != 0).then_some((i, row[i] & low));
+    let (k, word) = first
+        .or_else(|| inner.iter().position(|&w| w != 0).map(|k| (i + 1 + k, inner[k])))
+        .unwrap_or((j, row[j] & high));
+    Some(k as u32 * 64 + word.trailing_zeros())
+}
+
 /// The first footprint row `r` whose `need[r]` texels exceed the longest free run `free[r]` of
 /// the atlas row under it, if any. Compared in chunks without a branch inside one, so that the
 /// compiler vectorises it: a footprint of a few hundred rows is checked at every candidate row of
@@ -463,8 +488,7 @@ impl Occupancy {
                     let r = rows[p] as usize;
                     let row = self.row(y + r as u32);
                     for &(a, b) in &fp.rows[r] {
-                        let s = next(row, x + a, x + b + 1, true);
-                        if s <= x + b {
+                        if let Some(s) = first_occupied(row, x + a, x + b) {
                             // Every x' with x' + a in the occupied run from `s` collides too.
                             x = next(row, s, self.side, false) - a;
                             rows[..=p].rotate_right(1);
@@ -751,6 +775,33 @@ mod tests {
                 {
                     let want = (x..w).find(|&i| bit(i) == set).unwrap_or(w);
                     assert_eq!(next(&row, x, w, set), want, "x {x} w {w} set {set}");
+                }
+            }
+        }
+    }
+
+    /// `first_occupied` against a bit-by-bit search, for spans inside a word, across word
+    /// boundaries and over many words, on rows with few or many set bits.
+    #[test]
+    fn the_first_occupied_texel_of_a_span_is_the_first_set_bit() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        for case in 0..40 {
+            let row: Vec<u64> = (0..6)
+                .map(|_| match case % 3 {
+                    0 => 0,
+                    1 => 1u64 << rng.random_range(0..64),
+                    _ => rng.random::<u64>() & rng.random::<u64>() & rng.random::<u64>(),
+                })
+                .collect();
+            let bit = |x: u32| row[x as usize / 64] >> (x % 64) & 1 == 1;
+            for a in 0..384 {
+                for b in [a, a + 1, a + 63, a + 64, a + 65, a + 200, 383]
+                    .into_iter()
+                    .filter(|&b| b >= a && b < 384)
+                {
+                    let want = (a..=b).find(|&x| bit(x));
+                    assert_eq!(first_occupied(&row, a, b), want, "case {case}, {a}..={b}");
                 }
             }
         }
