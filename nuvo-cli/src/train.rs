@@ -276,11 +276,16 @@ fn print_report(report: &OutputReport, seconds: f64) {
         }
         if let Some(n) = m.layout.necks.as_ref().filter(|n| !n.skipped) {
             println!(
-                "       islands cut at their necks: {} (packing efficiency at 512²: {:.3} -> {:.3}; {} trials){}",
+                "       islands cut at their necks: {} (packing efficiency at 512²: {:.3} -> {:.3}; {} trials{}){}",
                 n.cuts,
                 n.efficiency_before,
                 n.efficiency_after,
                 n.trials,
+                match n.paths.len() {
+                    2 if n.chosen == 1 => "; the cautious path, at twice the seam price, of two",
+                    2 => "; the priced path of two",
+                    _ => "",
+                },
                 match n.editability {
                     Some([a, b]) if n.undone => format!(
                         "; undone: they cost {:.4} of Editability (estimated {a:.4} -> {b:.4}), more than the packing is worth",

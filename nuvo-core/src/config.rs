@@ -348,9 +348,12 @@ pub struct OutputConfig {
     pub cut_necks: bool,
     /// With `cut_necks`: how much packing a seam must buy, the least relative rise of the packing
     /// efficiency per unit of the cut's 3-D length over the square root of the surface's area
-    /// (`nuvo_atlas::necks::SEAM_COST`, 0.125, by default): larger keeps fewer, shorter seams
-    /// (0.25: Common Shapes packing 0.641 with 13.7 charts, Editability 0.9695), smaller cuts
-    /// for smaller gains (0.0625: 0.681 with 17.2). BENCHMARKS.md, "More neck cuts".
+    /// (`nuvo_atlas::necks::SEAM_COST`, 0.0625, by default; the pass's cautious second path asks
+    /// twice this, `nuvo_atlas::necks::CAUTIOUS_PRICE`): larger keeps fewer, shorter seams. On
+    /// Common Shapes, one path at 0.25: packing 0.641 with 13.7 charts, Editability 0.9695
+    /// (BENCHMARKS.md, "More neck cuts"); the two paths at 0.0625: 0.704 with 18.2 charts, where
+    /// the earlier default, one path at 0.125, gave 0.690 with 17.0 (BENCHMARKS.md, "Two paths
+    /// for the necks pass").
     pub neck_seam_cost: f64,
     /// How the atlas is laid out: `"squares"` (default, the paper's: one square cell per chart) or
     /// `"islands"` (not in the paper; `nuvo_atlas::islands`: every UV island packed on its own at
