@@ -264,7 +264,7 @@ pub fn cut_necks(mesh: &TriMesh, opts: &NeckOptions) -> Result<Necked, AtlasErro
         areas,
     };
     let prices = [opts.seam_cost, opts.seam_cost * CAUTIOUS_PRICE];
-    let (meshes, paths): (Vec<TriMesh>, Vec<Path>) = if prices[1] > prices[0] {
+    let (mut meshes, paths): (Vec<TriMesh>, Vec<NeckPath>) = if prices[1] > prices[0] {
         let (priced, cautious) = rayon::join(
             || greedy_path(mesh, opts, &start, prices[0]),
             || greedy_path(mesh, opts, &start, prices[1]),
@@ -274,47 +274,26 @@ pub fn cut_necks(mesh: &TriMesh, opts: &NeckOptions) -> Result<Necked, AtlasErro
         // No dearer price (a seam cost of zero): one path.
         [greedy_path(mesh, opts, &start, prices[0])?].into_iter().unzip()
     };
-    let objective = |p: &Path| {
-        if p.efficiency > 0.0 {
-            p.efficiency.ln() - opts.seam_cost * p.seam_added / start.size
-        } else {
-            f64::NEG_INFINITY
-        }
-    };
     // The better by the objective; on a tie the later path (the cautious one, fewer seams).
     let mut chosen = 0;
     for (k, path) in paths.iter().enumerate().skip(1) {
-        if objective(path) >= objective(&paths[chosen]) {
+        if path.objective >= paths[chosen].objective {
             chosen = k;
         }
     }
-    let summaries: Vec<NeckPath> = paths
-        .iter()
-        .zip(prices)
-        .map(|(p, seam_cost)| NeckPath {
-            seam_cost,
-            cuts: p.cuts,
-            trials: p.trials,
-            probes: p.probes,
-            efficiency_after: p.efficiency,
-            seam_added: p.seam_added,
-            objective: objective(p),
-        })
-        .collect();
     let kept = &paths[chosen];
     let report = NeckReport {
         cuts: kept.cuts,
         trials: kept.trials,
         probes: kept.probes,
         efficiency_before: start.efficiency,
-        efficiency_after: kept.efficiency,
+        efficiency_after: kept.efficiency_after,
         seam_added: kept.seam_added,
-        paths: summaries,
         chosen,
+        paths,
         ..Default::default()
     };
-    let mesh = meshes.into_iter().nth(chosen).expect("one mesh a path");
-    Ok(Necked { mesh, report })
+    Ok(Necked { mesh: meshes.swap_remove(chosen), report })
 }
 
 /// What both paths of [`cut_necks`] start from: the layout's packing before any cut, each
@@ -326,27 +305,18 @@ struct Start {
     size: f64,
 }
 
-/// Where one greedy path of [`cut_necks`] ended (besides its mesh): how many cuts it kept, the
-/// trials and probes it ran, the efficiency its probes proved and the seams' summed 3-D length.
-struct Path {
-    cuts: usize,
-    trials: usize,
-    probes: usize,
-    efficiency: f64,
-    seam_added: f64,
-}
-
 /// One greedy pass over the islands (module docs, **Trial**) asking each cut to buy packing at
-/// `seam_cost`: the mesh with the cuts it kept, and its summary.
+/// `seam_cost`: the mesh with the cuts it kept, and its summary (its objective at the pass's
+/// price, [`NeckOptions::seam_cost`]).
 fn greedy_path(
     mesh: &TriMesh,
     opts: &NeckOptions,
     start: &Start,
     seam_cost: f64,
-) -> Result<(TriMesh, Path), AtlasError> {
+) -> Result<(TriMesh, NeckPath), AtlasError> {
     let mut current = mesh.clone();
     let (mut efficiency, mut scale) = (start.efficiency, start.scale);
-    let mut path = Path { cuts: 0, trials: 0, probes: 0, efficiency, seam_added: 0.0 };
+    let mut path = NeckPath { seam_cost, ..Default::default() };
     let mut tried: HashSet<Vec<u32>> = HashSet::new();
     // Each island's waste, by its faces: a cut changes one island (the others keep their faces
     // and coordinates), so only its parts are measured again.
@@ -472,7 +442,12 @@ fn greedy_path(
         path.seam_added += seam;
         failures = 0;
     }
-    path.efficiency = efficiency;
+    path.efficiency_after = efficiency;
+    path.objective = if efficiency > 0.0 {
+        efficiency.ln() - opts.seam_cost * path.seam_added / size
+    } else {
+        f64::NEG_INFINITY
+    };
     Ok((current, path))
 }
 
