@@ -115,18 +115,18 @@ pub struct NeckOptions {
     /// default atlas side and of its gutter, fast enough for tens of trials).
     #[serde(skip)]
     pub packing: IslandPacking,
-    /// Trial packings (one packing attempt at one scale each) at most (default 40).
+    /// Trial packings (one packing attempt at one scale each) at most, on each path (default 40).
     pub max_trials: usize,
     /// Candidates tried per island (default 4).
     pub candidates: usize,
     /// Least rise of the trial packing's efficiency for which a cut is kept (default 0.01).
     pub min_gain: f64,
     /// Least relative rise of the efficiency per unit of the cut's relative length `L / √A`
-    /// (default [`SEAM_COST`]; module docs).
+    /// (default [`SEAM_COST`]; the cautious path asks [`CAUTIOUS_PRICE`] times it; module docs).
     pub seam_cost: f64,
-    /// Islands in a row whose cuts are all refused after which the pass ends (default 6).
+    /// Islands in a row whose cuts are all refused after which a path ends (default 6).
     pub max_failures: usize,
-    /// Packing attempts (trials and probes) times the mesh's faces at most (default 4e6: 41
+    /// Packing attempts (trials and probes) times the mesh's faces at most, on each path (default 4e6: 41
     /// attempts of 0.1–0.15 s each on a 97k-face horse, the whole pass on a 6k-face cow; at
     /// 2e6 the Common Shapes' mean packing was 0.670 instead of 0.684, at 6e6 the same 0.684).
     pub max_face_attempts: usize,
