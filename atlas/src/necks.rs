@@ -73,10 +73,13 @@
 //! Each part keeps the map it had (a part of an injective map is injective), so no face flips
 //! and no distortion changes; only seams and the layout do (the bake's caller then relaxes the
 //! parts with SLIM, [`crate::injective`], when it makes islands injective). Deterministic: the
-//! same mesh and options give the same bits. An island's candidates are packed up to a thread's
-//! worth at once (the other core was idle during a trial's sequential placements: the README
-//! bunny's pass 4.2 → 3.6 s); the first in order that packs is kept and the trials counted are
-//! those up to it, so neither the cuts nor the report depend on the number of threads.
+//! same mesh and options give the same bits. A path running alone packs an island's candidates
+//! up to a thread's worth at once (the other core was idle during a trial's sequential
+//! placements: the README bunny's pass 4.2 → 3.6 s); the first in order that packs is kept and
+//! the trials counted are those up to it, so neither the cuts nor the report depend on the
+//! number of threads, nor on whether the other path still runs.
+
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use foldhash::{HashMap, HashMapExt, HashSet, HashSetExt};
 
@@ -265,14 +268,15 @@ pub fn cut_necks(mesh: &TriMesh, opts: &NeckOptions) -> Result<Necked, AtlasErro
     };
     let prices = [opts.seam_cost, opts.seam_cost * CAUTIOUS_PRICE];
     let (mut meshes, paths): (Vec<TriMesh>, Vec<NeckPath>) = if prices[1] > prices[0] {
+        let running = AtomicUsize::new(2);
         let (priced, cautious) = rayon::join(
-            || greedy_path(mesh, opts, &start, prices[0]),
-            || greedy_path(mesh, opts, &start, prices[1]),
+            || greedy_path(mesh, opts, &start, prices[0], &running),
+            || greedy_path(mesh, opts, &start, prices[1], &running),
         );
         [priced?, cautious?].into_iter().unzip()
     } else {
         // No dearer price (a seam cost of zero): one path.
-        [greedy_path(mesh, opts, &start, prices[0])?].into_iter().unzip()
+        [greedy_path(mesh, opts, &start, prices[0], &AtomicUsize::new(1))?].into_iter().unzip()
     };
     // The better by the objective; on a tie the later path (the cautious one, fewer seams).
     let mut chosen = 0;
@@ -307,13 +311,33 @@ struct Start {
 
 /// One greedy pass over the islands (module docs, **Trial**) asking each cut to buy packing at
 /// `seam_cost`: the mesh with the cuts it kept, and its summary (its objective at the pass's
-/// price, [`NeckOptions::seam_cost`]).
+/// price, [`NeckOptions::seam_cost`]). `running` counts the paths not yet ended, this one
+/// included: a path packs ahead (several candidates at once, the next probe beside this one)
+/// only while it runs alone. Why: two paths side by side already keep both cores busy, and
+/// packing ahead then spends a core on trials and probes that are thrown away (the README
+/// bunny's necks phase 1.5–1.6 → 1.3–1.4 s without it). What is packed ahead never changes
+/// what is kept or counted, so neither does `running`.
 fn greedy_path(
     mesh: &TriMesh,
     opts: &NeckOptions,
     start: &Start,
     seam_cost: f64,
+    running: &AtomicUsize,
 ) -> Result<(TriMesh, NeckPath), AtlasError> {
+    let result = greedy_path_steps(mesh, opts, start, seam_cost, running);
+    running.fetch_sub(1, Ordering::Relaxed);
+    result
+}
+
+/// [`greedy_path`] but for counting itself out of `running` when it ends.
+fn greedy_path_steps(
+    mesh: &TriMesh,
+    opts: &NeckOptions,
+    start: &Start,
+    seam_cost: f64,
+    running: &AtomicUsize,
+) -> Result<(TriMesh, NeckPath), AtlasError> {
+    let alone = || running.load(Ordering::Relaxed) <= 1;
     let mut current = mesh.clone();
     let (mut efficiency, mut scale) = (start.efficiency, start.scale);
     let mut path = NeckPath { seam_cost, ..Default::default() };
@@ -362,7 +386,7 @@ fn greedy_path(
             {
                 room += 1;
             }
-            let batch = room.min(rayon::current_num_threads().max(1));
+            let batch = room.min(if alone() { rayon::current_num_threads().max(1) } else { 1 });
             if batch == 0 {
                 break;
             }
@@ -410,7 +434,8 @@ fn greedy_path(
             // The probe after this one if this one packs is packed at once (the other core
             // was mostly idle through the probes); it counts only when this one packs, as
             // the sequential probes would then make it next. Same probes, same result.
-            let ahead = goes_on(next, hi, path.probes + 1).then(|| next_of(next, hi, 2.0 * step));
+            let ahead =
+                (alone() && goes_on(next, hi, path.probes + 1)).then(|| next_of(next, hi, 2.0 * step));
             let (packs, ahead) = match ahead {
                 Some(a) => {
                     let (packs, packs_ahead) = rayon::join(
