@@ -455,10 +455,14 @@ impl Occupancy {
         let need: Vec<u32> =
             fp.rows.iter().map(|r| r.iter().map(|&(a, b)| b - a + 1).max().unwrap_or(0)).collect();
         let mut best: Option<(Key, u32, u32)> = None;
-        // No position at (x', y') with x' ≥ x, y' ≥ y ranks before `best`: every rule's first
-        // key component never falls as `x` or `y` grows.
+        // No position at (x', y') with x' ≥ x, y' ≥ y ranks before `best` once (x, y) does not:
+        // every rule's key (compared whole) never falls as `x` or `y` grows. So a row's scan
+        // stops at a position that could only tie or lose, before testing whether it fits: a
+        // corner or square rule kept verifying whole footprints at positions whose first key
+        // component only tied the best's (counted on the README bunny's bake when only the
+        // first component was compared: 42% of the fits verified, a fifth of all row tests).
         let beaten = |best: &Option<(Key, u32, u32)>, x: u32, y: u32| {
-            best.is_some_and(|(k, ..)| rule.key(fp, x, y).0 > k.0)
+            best.is_some_and(|(k, ..)| rule.key(fp, x, y) >= k)
         };
         let h = fp.h as usize;
         // The footprint rows in the order they are tested, the last that blocked a position
