@@ -300,6 +300,15 @@ pub fn cut_necks(mesh: &TriMesh, opts: &NeckOptions) -> Result<Necked, AtlasErro
     Ok(Necked { mesh: meshes.swap_remove(chosen), report })
 }
 
+/// Takes one path off the count of [`greedy_path`]'s `running` when dropped.
+struct EndsPath<'a>(&'a AtomicUsize);
+
+impl Drop for EndsPath<'_> {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::Relaxed);
+    }
+}
+
 /// What both paths of [`cut_necks`] start from: the layout's packing before any cut, each
 /// face's 3-D area and the square root of their sum (the length seams are measured against).
 struct Start {
@@ -324,19 +333,8 @@ fn greedy_path(
     seam_cost: f64,
     running: &AtomicUsize,
 ) -> Result<(TriMesh, NeckPath), AtlasError> {
-    let result = greedy_path_steps(mesh, opts, start, seam_cost, running);
-    running.fetch_sub(1, Ordering::Relaxed);
-    result
-}
-
-/// [`greedy_path`] but for counting itself out of `running` when it ends.
-fn greedy_path_steps(
-    mesh: &TriMesh,
-    opts: &NeckOptions,
-    start: &Start,
-    seam_cost: f64,
-    running: &AtomicUsize,
-) -> Result<(TriMesh, NeckPath), AtlasError> {
+    // Counted out when the path ends, by an error too.
+    let _ended = EndsPath(running);
     let alone = || running.load(Ordering::Relaxed) <= 1;
     let mut current = mesh.clone();
     let (mut efficiency, mut scale) = (start.efficiency, start.scale);
