@@ -77,7 +77,7 @@
 //!   [`IslandPacking::search`] attempts, [`ORDER_SEARCH`] in `nuvo unwrap`'s layout): neighbours
 //!   in the order swapped, kept when the packing fits 1% larger. Then (with the order search)
 //!   by a search over the places of the order's first, large islands (`search_places`,
-//!   `shapes::pack_shapes_searched`): each may take its rule's first place in another
+//!   `shapes::pack_shapes_deepening`): each may take its rule's first place in another
 //!   orientation, a few times along a path, the rest placed as before; kept 0.3% larger at a
 //!   time, within [`PLACE_SEARCH_BUDGET`] placements searched.
 //! - **Efficiency**: the summed unsigned UV area of all faces in the output (over the unit
@@ -939,7 +939,7 @@ fn best_shapes(
 }
 
 /// The packing `best` of the order search, raised [`PLACE_SEARCH_STEP`] at a time while
-/// [`shapes::pack_shapes_searched`] finds a packing of the search's last `order` by its last
+/// [`shapes::pack_shapes_deepening`] finds a packing of the search's last `order` by its last
 /// `rule` at the next scale: first with one departure from the rule's choice, then two, up to
 /// [`PLACE_SEARCH`]'s; all of it within [`PLACE_SEARCH_BUDGET`] footprint placements searched.
 /// Nothing without the order search (`search == 0`: the necks pass's trial layouts) or beyond
@@ -961,19 +961,13 @@ fn search_places(
         return best;
     }
     let mut budget = PLACE_SEARCH_BUDGET;
-    'scales: while budget > 0 {
+    while budget > 0 {
         let target = best.0 * (1.0 + PLACE_SEARCH_STEP);
         let fps = footprints_at(islands, target, res, rotate);
-        for discrepancies in 1..=PLACE_SEARCH.discrepancies {
-            let limits = shapes::SearchLimits { discrepancies, ..PLACE_SEARCH };
-            if let Some(placed) =
-                shapes::pack_shapes_searched(&fps, order, res, gutter, rule, limits, &mut budget)
-            {
-                best = (target, placed);
-                continue 'scales;
-            }
+        match shapes::pack_shapes_deepening(&fps, order, res, gutter, rule, PLACE_SEARCH, &mut budget) {
+            Some(placed) => best = (target, placed),
+            None => break,
         }
-        break;
     }
     best
 }

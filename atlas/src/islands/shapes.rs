@@ -49,6 +49,9 @@
 
 use foldhash::{HashMap, HashMapExt};
 
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
 use rayon::prelude::*;
 
 use super::{Island, rotated};
@@ -591,13 +594,29 @@ pub(super) fn pack_shapes_searched(
     limits: SearchLimits,
     budget: &mut usize,
 ) -> Option<Vec<ShapePlaced>> {
-    let search = Search { footprints, order, gutter, rule, limits };
-    let found = search.from(Occupancy::new(side, gutter), 0, limits.discrepancies, &[], budget)?;
-    let mut out: Vec<Option<ShapePlaced>> = vec![None; footprints.len()];
-    for Step { island, turn, x, y } in found {
-        out[island] = Some(ShapePlaced { x, y, footprint: footprints[island][turn].clone() });
-    }
-    out.into_iter().collect()
+    let search = Search { footprints, order, gutter, rule, limits, memo: None };
+    search.run(side, budget)
+}
+
+/// [`pack_shapes_searched`] with one departure allowed, then two, up to
+/// [`SearchLimits::discrepancies`], until one finds a packing (the iterations of limited
+/// discrepancy search), sharing one `budget`. Each iteration walks again the paths of the one
+/// before (a path with fewer departures is also a path with at most more), in the same order;
+/// so what those paths found is kept ([`Memo`]) and replayed, each call it made paid again
+/// from the budget without being made. So the packing and the budget left are those of calling
+/// [`pack_shapes_searched`] once per iteration, and only the calls are fewer. Measured on the
+/// README bunny's bake (BENCHMARKS.md, "The place search's paths remembered").
+pub(super) fn pack_shapes_deepening(
+    footprints: &[Vec<Footprint>],
+    order: &[usize],
+    side: u32,
+    gutter: u32,
+    rule: Rule,
+    limits: SearchLimits,
+    budget: &mut usize,
+) -> Option<Vec<ShapePlaced>> {
+    let search = Search { footprints, order, gutter, rule, limits, memo: None };
+    search.deepen(side, &Memo::default(), budget)
 }
 
 /// How far [`pack_shapes_searched`] looks (its docs).
@@ -614,14 +633,60 @@ pub(super) struct SearchLimits {
     pub speculate: bool,
 }
 
-/// One island placed on a search path: its index, orientation (index into its footprints) and
-/// position.
+/// One island placed on a search path: its index, orientation (index into its footprints),
+/// position, and the rank of that place among the island's places on the path's occupancy (0:
+/// the rule's own choice).
 #[derive(Clone, Copy, Debug)]
 struct Step {
     island: usize,
     turn: usize,
     x: u32,
     y: u32,
+    rank: usize,
+}
+
+/// What a deepening search ([`pack_shapes_deepening`]) has learnt of its tree, by path (the
+/// ranks of the searched islands' places, which fix the occupancy): a searched node's places,
+/// and the leaves whose remaining islands did not all fit. Facts of the geometry, the same
+/// whichever thread or iteration found them; what a search ended by its budget did not finish
+/// is not kept.
+#[derive(Default)]
+struct Memo {
+    known: Mutex<HashMap<Vec<usize>, Known>>,
+    /// Calls paid again from the budget without being made (the tests' check that the memo
+    /// serves).
+    replayed: AtomicUsize,
+}
+
+/// One path's entry in the [`Memo`].
+#[derive(Clone)]
+enum Known {
+    /// A searched island's first [`SearchLimits::width`] places (`Search::places`).
+    Places(Vec<(usize, u32, u32)>),
+    /// A leaf whose remaining islands failed: the number of them searched, the last one the
+    /// island that fits nowhere.
+    Fails(usize),
+}
+
+impl Memo {
+    fn get(&self, path: &[Step]) -> Option<Known> {
+        self.known.lock().unwrap_or_else(|e| e.into_inner()).get(&ranks(path)).cloned()
+    }
+
+    fn put(&self, path: &[Step], known: Known) {
+        self.known.lock().unwrap_or_else(|e| e.into_inner()).insert(ranks(path), known);
+    }
+
+    /// [`pay`] for `calls` the memo spares; whether the search may go on.
+    fn pay_again(&self, budget: &mut usize, calls: usize) -> bool {
+        self.replayed.fetch_add(calls.min(*budget), Ordering::Relaxed);
+        pay(budget, calls)
+    }
+}
+
+/// A path's key in the [`Memo`].
+fn ranks(path: &[Step]) -> Vec<usize> {
+    path.iter().map(|s| s.rank).collect()
 }
 
 /// One [`pack_shapes_searched`] call's inputs.
@@ -631,9 +696,30 @@ struct Search<'a> {
     gutter: u32,
     rule: Rule,
     limits: SearchLimits,
+    /// Where the paths of earlier iterations are remembered ([`pack_shapes_deepening`]).
+    memo: Option<&'a Memo>,
 }
 
-impl Search<'_> {
+impl<'a> Search<'a> {
+    /// [`pack_shapes_deepening`] with `memo`: the iterations `1..=limits.discrepancies`.
+    fn deepen(self, side: u32, memo: &'a Memo, budget: &mut usize) -> Option<Vec<ShapePlaced>> {
+        (1..=self.limits.discrepancies).find_map(|discrepancies| {
+            let limits = SearchLimits { discrepancies, ..self.limits };
+            Search { limits, memo: Some(memo), ..self }.run(side, budget)
+        })
+    }
+
+    /// The packing of every island, from an empty `side²` atlas.
+    fn run(&self, side: u32, budget: &mut usize) -> Option<Vec<ShapePlaced>> {
+        let found =
+            self.from(Occupancy::new(side, self.gutter), 0, self.limits.discrepancies, &[], budget)?;
+        let mut out: Vec<Option<ShapePlaced>> = vec![None; self.footprints.len()];
+        for Step { island, turn, x, y, .. } in found {
+            out[island] = Some(ShapePlaced { x, y, footprint: self.footprints[island][turn].clone() });
+        }
+        out.into_iter().collect()
+    }
+
     /// Places `order[d..]` on `occ` after the islands of `path`, with at most `discrepancies`
     /// more departures from the rule's choice; the whole path when every island fits.
     fn from(
@@ -649,13 +735,13 @@ impl Search<'_> {
         }
         let island = self.order[d];
         let width = if discrepancies == 0 { 1 } else { self.limits.width };
-        let places = self.places(&occ, island, width, budget);
+        let places = self.places_on_path(&occ, island, width, path, budget);
         let child = |rank: usize, budget: &mut usize| {
             let (turn, x, y) = places[rank];
             let mut next = occ.clone();
             next.occupy(&self.footprints[island][turn], x, y, self.gutter);
             let mut path = path.to_vec();
-            path.push(Step { island, turn, x, y });
+            path.push(Step { island, turn, x, y, rank });
             self.from(next, d + 1, discrepancies - usize::from(rank > 0), &path, budget)
         };
         let mut rank = 0;
@@ -714,7 +800,38 @@ impl Search<'_> {
         found.into_iter().take(width).map(|(_, k, x, y)| (k, x, y)).collect()
     }
 
-    /// `order[d..]` placed on `occ` after `path` as [`pack_shapes`] places them.
+    /// [`Search::places`] of the searched island at the end of `path`, from the [`Memo`] when an
+    /// earlier iteration searched them (paying their calls again).
+    fn places_on_path(
+        &self,
+        occ: &Occupancy,
+        island: usize,
+        width: usize,
+        path: &[Step],
+        budget: &mut usize,
+    ) -> Vec<(usize, u32, u32)> {
+        let Some(memo) = self.memo else {
+            return self.places(occ, island, width, budget);
+        };
+        if let Some(Known::Places(mut places)) = memo.get(path) {
+            if !memo.pay_again(budget, self.footprints[island].len()) {
+                return Vec::new();
+            }
+            places.truncate(width);
+            return places;
+        }
+        let paid = *budget >= self.footprints[island].len();
+        let mut places = self.places(occ, island, self.limits.width, budget);
+        if paid {
+            memo.put(path, Known::Places(places.clone()));
+        }
+        places.truncate(width);
+        places
+    }
+
+    /// `order[d..]` placed on `occ` after `path` as [`pack_shapes`] places them. A leaf the
+    /// [`Memo`] knows to fail pays the calls that found it again (as many as the budget holds)
+    /// and fails; a leaf found to fail is kept there.
     fn rest(
         &self,
         mut occ: Occupancy,
@@ -722,10 +839,27 @@ impl Search<'_> {
         mut path: Vec<Step>,
         budget: &mut usize,
     ) -> Option<Vec<Step>> {
-        for &island in &self.order[d..] {
-            let (turn, x, y) = *self.places(&occ, island, 1, budget).first()?;
+        if let Some(memo) = self.memo
+            && let Some(Known::Fails(searched)) = memo.get(&path)
+        {
+            for &island in &self.order[d..d + searched] {
+                if !memo.pay_again(budget, self.footprints[island].len()) {
+                    break;
+                }
+            }
+            return None;
+        }
+        let searched_from = path.len();
+        for (k, &island) in self.order[d..].iter().enumerate() {
+            let paid = *budget >= self.footprints[island].len();
+            let Some(&(turn, x, y)) = self.places(&occ, island, 1, budget).first() else {
+                if let Some(memo) = self.memo.filter(|_| paid) {
+                    memo.put(&path[..searched_from], Known::Fails(k + 1));
+                }
+                return None;
+            };
             occ.occupy(&self.footprints[island][turn], x, y, self.gutter);
-            path.push(Step { island, turn, x, y });
+            path.push(Step { island, turn, x, y, rank: 0 });
         }
         Some(path)
     }
@@ -1186,6 +1320,50 @@ mod tests {
             }
         }
         assert!(exhausted > 0, "no budget ran out: the reconciliation went untested");
+    }
+
+    /// The deepening search, which remembers the paths of its earlier iterations, gives the
+    /// packing and leaves the budget that its iterations as separate searches do, for every
+    /// budget from none to more than they need; and the remembered paths spare calls.
+    #[test]
+    fn the_deepening_search_is_its_iterations_one_after_the_other() {
+        use rand::SeedableRng;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(37);
+        let (mut replayed, mut exhausted, mut found_late) = (0, 0, 0);
+        for _ in 0..400 {
+            let (footprints, order, side, gutter) = random_rects(&mut rng);
+            let limits = SearchLimits { depth: 4, width: 3, discrepancies: 3, speculate: true };
+            let apart = |budget: &mut usize| {
+                (1..=limits.discrepancies).find_map(|discrepancies| {
+                    let limits = SearchLimits { discrepancies, ..limits };
+                    pack_shapes_searched(&footprints, &order, side, gutter, Rule::LowestTop, limits, budget)
+                })
+            };
+            let mut full = usize::MAX;
+            apart(&mut full);
+            let needed = usize::MAX - full;
+            let first = SearchLimits { discrepancies: 1, ..limits };
+            let mut first_only = usize::MAX;
+            let rule = Rule::LowestTop;
+            let fails_first =
+                pack_shapes_searched(&footprints, &order, side, gutter, rule, first, &mut first_only);
+            for budget in (0..=needed + 2).step_by((needed / 25).max(1)) {
+                let (mut one, mut two) = (budget, budget);
+                let a = apart(&mut one);
+                let memo = Memo::default();
+                let search =
+                    Search { footprints: &footprints, order: &order, gutter, rule, limits, memo: None };
+                let b = search.deepen(side, &memo, &mut two);
+                assert_eq!(a.as_deref().map(spots), b.as_deref().map(spots), "budget {budget}");
+                assert_eq!(one, two, "budget {budget}");
+                replayed += memo.replayed.load(Ordering::Relaxed);
+                exhausted += usize::from(one == 0);
+                found_late += usize::from(fails_first.is_none() && b.is_some());
+            }
+        }
+        assert!(replayed > 0, "no call was spared: the memo went unused");
+        assert!(exhausted > 0, "no budget ran out: the replay's payments went untested");
+        assert!(found_late > 0, "no packing needed a later iteration");
     }
 
     #[test]
