@@ -1055,14 +1055,18 @@ fn search_orders(
         .collect();
     let mut target = best.0 * (1.0 + SEARCH_STEP);
     let mut fps = footprints(target);
+    // The current order's packing at the target, kept island by island: an attempt places only
+    // the islands from its swap on, and none when the current order fails before the swap.
+    let mut head = shapes::GreedyHead::new(&fps, &order, res, gutter, rule);
     let attempt = |order: &[usize],
                    rule: Rule,
                    fps: &[Vec<shapes::Footprint>],
+                   head: &shapes::GreedyHead,
                    (i, j, r): (usize, usize, Option<Rule>)| {
         let mut candidate = order.to_vec();
         candidate.swap(i, j);
         let r = r.unwrap_or(rule);
-        shapes::pack_shapes(fps, &candidate, res, gutter, r).map(|placed| (placed, candidate, r))
+        head.pack(fps, &candidate, res, gutter, r).map(|placed| (placed, candidate, r))
     };
     let mut a = 0;
     while a < moves.len() {
@@ -1070,10 +1074,11 @@ fn search_orders(
         // makes it when the first does not fit (most do not); when the first fits, the second
         // is made again from the new packing. Same result as one at a time.
         let (first, second) = match moves.get(a + 1) {
-            Some(&next) => {
-                rayon::join(|| attempt(&order, rule, &fps, moves[a]), || attempt(&order, rule, &fps, next))
-            }
-            None => (attempt(&order, rule, &fps, moves[a]), None),
+            Some(&next) => rayon::join(
+                || attempt(&order, rule, &fps, &head, moves[a]),
+                || attempt(&order, rule, &fps, &head, next),
+            ),
+            None => (attempt(&order, rule, &fps, &head, moves[a]), None),
         };
         let (taken, fitted) = match (first, second) {
             (Some(fitted), _) => (1, Some(fitted)),
@@ -1083,6 +1088,7 @@ fn search_orders(
             (best, order, rule) = ((target, placed), candidate, r);
             target = best.0 * (1.0 + SEARCH_STEP);
             fps = footprints(target);
+            head = shapes::GreedyHead::new(&fps, &order, res, gutter, rule);
         }
         a += taken;
     }

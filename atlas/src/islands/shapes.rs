@@ -558,9 +558,8 @@ pub(super) fn pack_shapes(
     rule: Rule,
 ) -> Option<Vec<ShapePlaced>> {
     // The search's first path without a departure is the greedy placement itself.
-    let greedy = SearchLimits { depth: 0, width: 1, discrepancies: 0, speculate: false };
     let mut unlimited = usize::MAX;
-    pack_shapes_searched(footprints, order, side, gutter, rule, greedy, &mut unlimited)
+    pack_shapes_searched(footprints, order, side, gutter, rule, GREEDY, &mut unlimited)
 }
 
 /// [`pack_shapes`] with a limited discrepancy search (Harvey & Ginsberg, "Limited Discrepancy
@@ -597,6 +596,77 @@ pub(super) fn pack_shapes_searched(
     let search = Search { footprints, order, gutter, rule, limits, memo: None };
     search.run(side, budget)
 }
+
+/// [`pack_shapes`]' packing of one order by one rule, kept island by island (the occupancy
+/// before each), so that [`GreedyHead::pack`] packs an order that shares its first islands from
+/// where they were placed. Why: the order search tries orders that differ from the current one
+/// by a swap of two islands (the parent module's `search_orders`); the islands before the swap
+/// are placed as in the current order, and when the current order's packing fails at an island
+/// before the swap, the other order fails there too, without a placement searched.
+pub(super) struct GreedyHead {
+    order: Vec<usize>,
+    rule: Rule,
+    /// `before[t]`: the occupancy before `order[t]` is placed, for every `t` up to the first
+    /// island that fits nowhere (then the last entry is the occupancy it did not fit on) or past
+    /// the last island (then the last entry holds all of them).
+    before: Vec<Occupancy>,
+    /// The islands placed, in order.
+    steps: Vec<Step>,
+}
+
+impl GreedyHead {
+    /// [`pack_shapes`]' packing of `order` by `rule`, kept (type docs).
+    pub(super) fn new(
+        footprints: &[Vec<Footprint>],
+        order: &[usize],
+        side: u32,
+        gutter: u32,
+        rule: Rule,
+    ) -> Self {
+        let search = Search { footprints, order, gutter, rule, limits: GREEDY, memo: None };
+        let mut occ = Occupancy::new(side, gutter);
+        let (mut before, mut steps, mut unlimited) = (Vec::new(), Vec::new(), usize::MAX);
+        for &island in order {
+            before.push(occ.clone());
+            let Some(&(turn, x, y)) = search.places(&occ, island, 1, &mut unlimited).first() else {
+                return GreedyHead { order: order.to_vec(), rule, before, steps };
+            };
+            occ.occupy(&footprints[island][turn], x, y, gutter);
+            steps.push(Step { island, turn, x, y, rank: 0 });
+        }
+        before.push(occ);
+        GreedyHead { order: order.to_vec(), rule, before, steps }
+    }
+
+    /// [`pack_shapes`]`(footprints, order, side, gutter, rule)`, bit for bit; when `rule` is
+    /// the kept rule, only the islands after those `order` shares with the kept order are
+    /// placed (`footprints`, `side` and `gutter` must be those the head was made with).
+    pub(super) fn pack(
+        &self,
+        footprints: &[Vec<Footprint>],
+        order: &[usize],
+        side: u32,
+        gutter: u32,
+        rule: Rule,
+    ) -> Option<Vec<ShapePlaced>> {
+        if rule != self.rule {
+            return pack_shapes(footprints, order, side, gutter, rule);
+        }
+        let shared = order.iter().zip(&self.order).take_while(|(a, b)| a == b).count();
+        if shared > self.steps.len() {
+            // The island the kept order's packing could not place comes at the same place, on
+            // the same occupancy.
+            return None;
+        }
+        let search = Search { footprints, order, gutter, rule, limits: GREEDY, memo: None };
+        let path = self.steps[..shared].to_vec();
+        let found = search.rest(self.before[shared].clone(), shared, path, &mut { usize::MAX })?;
+        search.placed(found)
+    }
+}
+
+/// The search without departures: [`pack_shapes`]' greedy placement.
+const GREEDY: SearchLimits = SearchLimits { depth: 0, width: 1, discrepancies: 0, speculate: false };
 
 /// [`pack_shapes_searched`] with one departure allowed, then two, up to
 /// [`SearchLimits::discrepancies`], until one finds a packing (the iterations of limited
@@ -713,8 +783,13 @@ impl<'a> Search<'a> {
     fn run(&self, side: u32, budget: &mut usize) -> Option<Vec<ShapePlaced>> {
         let found =
             self.from(Occupancy::new(side, self.gutter), 0, self.limits.discrepancies, &[], budget)?;
+        self.placed(found)
+    }
+
+    /// The packing of a path that placed every island, by island.
+    fn placed(&self, path: Vec<Step>) -> Option<Vec<ShapePlaced>> {
         let mut out: Vec<Option<ShapePlaced>> = vec![None; self.footprints.len()];
-        for Step { island, turn, x, y, .. } in found {
+        for Step { island, turn, x, y, .. } in path {
             out[island] = Some(ShapePlaced { x, y, footprint: self.footprints[island][turn].clone() });
         }
         out.into_iter().collect()
@@ -1364,6 +1439,37 @@ mod tests {
         assert!(replayed > 0, "no call was spared: the memo went unused");
         assert!(exhausted > 0, "no budget ran out: the replay's payments went untested");
         assert!(found_late > 0, "no packing needed a later iteration");
+    }
+
+    /// An order packed from a kept head is the order packed from scratch, whether it shares
+    /// none, some or all of the kept order's islands, whether the kept packing failed before,
+    /// at or after the islands it changes, and by another rule.
+    #[test]
+    fn an_order_packed_from_a_kept_head_is_the_order_packed_whole() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(41);
+        let rules = [Rule::LowestTop, Rule::Corner, Rule::Square];
+        let (mut failed_before_swap, mut placed_from_head) = (0, 0);
+        for _ in 0..150 {
+            let (fps, order, side, gutter) = random_rects(&mut rng);
+            let rule = rules[rng.random_range(0..3)];
+            let head = GreedyHead::new(&fps, &order, side, gutter, rule);
+            let n = order.len();
+            for i in 0..n {
+                for j in i..(i + 4).min(n) {
+                    let mut candidate = order.clone();
+                    candidate.swap(i, j);
+                    for r in [rule, rules[rng.random_range(0..3)]] {
+                        let whole = pack_shapes(&fps, &candidate, side, gutter, r);
+                        let kept = head.pack(&fps, &candidate, side, gutter, r);
+                        assert_eq!(whole.as_deref().map(spots), kept.as_deref().map(spots), "swap {i} {j}");
+                        failed_before_swap += usize::from(r == rule && i > head.steps.len());
+                        placed_from_head += usize::from(r == rule && i > 0 && kept.is_some());
+                    }
+                }
+            }
+        }
+        assert!(failed_before_swap > 0 && placed_from_head > 0, "{failed_before_swap} {placed_from_head}");
     }
 
     #[test]
