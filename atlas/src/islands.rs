@@ -997,7 +997,9 @@ pub const PLACE_SEARCH_STEP: f64 = 0.003;
 /// Footprint placements (`best_fit` calls) `search_places` may search in all: on the Common
 /// Shapes atlases at 2048², 0.54 s a mesh on average and 1.5 s at most (the teapot) on 2 Zen 5
 /// cores when places were searched one at a time, ~0.3 s less on the teapot two at a time
-/// (BENCHMARKS.md). The calls counted are those of the sequential search either way.
+/// (BENCHMARKS.md). The calls counted are those of the sequential search either way, and of
+/// its iterations as separate searches: a call the memo of `shapes::pack_shapes_deepening`
+/// spares is counted as if made.
 pub const PLACE_SEARCH_BUDGET: usize = 10_000;
 
 /// Packing attempts of the order search (`search_orders`) in `nuvo unwrap`'s final layout.
