@@ -77,7 +77,7 @@
 //!   [`IslandPacking::search`] attempts, [`ORDER_SEARCH`] in `nuvo unwrap`'s layout): neighbours
 //!   in the order swapped, kept when the packing fits 1% larger. Then (with the order search)
 //!   by a search over the places of the order's first, large islands (`search_places`,
-//!   `shapes::pack_shapes_deepening`): each may take its rule's first place in another
+//!   `shapes::pack_shapes_searched`): each may take its rule's first place in another
 //!   orientation, a few times along a path, the rest placed as before; kept 0.3% larger at a
 //!   time, within [`PLACE_SEARCH_BUDGET`] placements searched.
 //! - **Efficiency**: the summed unsigned UV area of all faces in the output (over the unit
@@ -939,9 +939,9 @@ fn best_shapes(
 }
 
 /// The packing `best` of the order search, raised [`PLACE_SEARCH_STEP`] at a time while
-/// [`shapes::pack_shapes_deepening`] finds a packing of the search's last `order` by its last
+/// [`shapes::pack_shapes_searched`] finds a packing of the search's last `order` by its last
 /// `rule` at the next scale: first with one departure from the rule's choice, then two, up to
-/// [`PLACE_SEARCH`]'s; all of it within [`PLACE_SEARCH_BUDGET`] footprint placements searched.
+/// [`PLACE_SEARCH`]'s (`SearchLimits::deepen`); all of it within [`PLACE_SEARCH_BUDGET`] footprint placements searched.
 /// Nothing without the order search (`search == 0`: the necks pass's trial layouts) or beyond
 /// [`SEARCH_UP_TO`] islands. Measured on re-bakes of the 14 Common Shapes checkpoints
 /// (BENCHMARKS.md, "The large islands' places searched"): packing efficiency 0.6800 → 0.6902,
@@ -964,7 +964,7 @@ fn search_places(
     while budget > 0 {
         let target = best.0 * (1.0 + PLACE_SEARCH_STEP);
         let fps = footprints_at(islands, target, res, rotate);
-        match shapes::pack_shapes_deepening(&fps, order, res, gutter, rule, PLACE_SEARCH, &mut budget) {
+        match shapes::pack_shapes_searched(&fps, order, res, gutter, rule, PLACE_SEARCH, &mut budget) {
             Some(placed) => best = (target, placed),
             None => break,
         }
@@ -988,7 +988,7 @@ fn footprints_at(islands: &[Island], scale: f64, res: u32, rotate: bool) -> Vec<
 /// Common Shapes atlases), each in up to 6 orientations, at most 3 of them away from the
 /// rule's choice.
 const PLACE_SEARCH: shapes::SearchLimits =
-    shapes::SearchLimits { depth: 6, width: 6, discrepancies: 3, speculate: true };
+    shapes::SearchLimits { depth: 6, width: 6, discrepancies: 3, speculate: true, deepen: true };
 
 /// The relative rise of the scale at each step of `search_places`: finer than the order
 /// search's [`SEARCH_STEP`], as each step's search is dearer and its gain smaller.
@@ -998,8 +998,8 @@ pub const PLACE_SEARCH_STEP: f64 = 0.003;
 /// Shapes atlases at 2048², 0.54 s a mesh on average and 1.5 s at most (the teapot) on 2 Zen 5
 /// cores when places were searched one at a time, ~0.3 s less on the teapot two at a time
 /// (BENCHMARKS.md). The calls counted are those of the sequential search either way, and of
-/// its iterations as separate searches: a call the memo of `shapes::pack_shapes_deepening`
-/// spares is counted as if made.
+/// its iterations as separate searches: a call the memo of a deepening search
+/// (`shapes::SearchLimits::deepen`) spares is counted as if made.
 pub const PLACE_SEARCH_BUDGET: usize = 10_000;
 
 /// Packing attempts of the order search (`search_orders`) in `nuvo unwrap`'s final layout.
@@ -1056,31 +1056,26 @@ fn search_orders(
         })
         .collect();
     let mut target = best.0 * (1.0 + SEARCH_STEP);
-    let mut fps = footprints(target);
     // The current order's packing at the target, kept island by island: an attempt places only
     // the islands from its swap on, and none when the current order fails before the swap.
-    let mut head = shapes::GreedyHead::new(&fps, &order, res, gutter, rule);
-    let attempt = |order: &[usize],
-                   rule: Rule,
-                   fps: &[Vec<shapes::Footprint>],
-                   head: &shapes::GreedyHead,
-                   (i, j, r): (usize, usize, Option<Rule>)| {
-        let mut candidate = order.to_vec();
-        candidate.swap(i, j);
-        let r = r.unwrap_or(rule);
-        head.pack(fps, &candidate, res, gutter, r).map(|placed| (placed, candidate, r))
-    };
+    let mut head = shapes::GreedyHead::new(footprints(target), &order, res, gutter, rule);
+    let attempt =
+        |order: &[usize], rule: Rule, head: &shapes::GreedyHead, (i, j, r): (usize, usize, Option<Rule>)| {
+            let mut candidate = order.to_vec();
+            candidate.swap(i, j);
+            let r = r.unwrap_or(rule);
+            head.pack(&candidate, r).map(|placed| (placed, candidate, r))
+        };
     let mut a = 0;
     while a < moves.len() {
         // Two attempts at once: the second from the same packing, as the sequential search
         // makes it when the first does not fit (most do not); when the first fits, the second
         // is made again from the new packing. Same result as one at a time.
         let (first, second) = match moves.get(a + 1) {
-            Some(&next) => rayon::join(
-                || attempt(&order, rule, &fps, &head, moves[a]),
-                || attempt(&order, rule, &fps, &head, next),
-            ),
-            None => (attempt(&order, rule, &fps, &head, moves[a]), None),
+            Some(&next) => {
+                rayon::join(|| attempt(&order, rule, &head, moves[a]), || attempt(&order, rule, &head, next))
+            }
+            None => (attempt(&order, rule, &head, moves[a]), None),
         };
         let (taken, fitted) = match (first, second) {
             (Some(fitted), _) => (1, Some(fitted)),
@@ -1089,8 +1084,7 @@ fn search_orders(
         if let Some((placed, candidate, r)) = fitted {
             (best, order, rule) = ((target, placed), candidate, r);
             target = best.0 * (1.0 + SEARCH_STEP);
-            fps = footprints(target);
-            head = shapes::GreedyHead::new(&fps, &order, res, gutter, rule);
+            head = shapes::GreedyHead::new(footprints(target), &order, res, gutter, rule);
         }
         a += taken;
     }

@@ -594,16 +594,20 @@ pub(super) fn pack_shapes_searched(
     budget: &mut usize,
 ) -> Option<Vec<ShapePlaced>> {
     let search = Search { footprints, order, gutter, rule, limits, memo: None };
-    search.run(side, budget)
+    if limits.deepen { search.deepen(side, &Memo::default(), budget) } else { search.run(side, budget) }
 }
 
-/// [`pack_shapes`]' packing of one order by one rule, kept island by island (the occupancy
-/// before each), so that [`GreedyHead::pack`] packs an order that shares its first islands from
-/// where they were placed. Why: the order search tries orders that differ from the current one
-/// by a swap of two islands (the parent module's `search_orders`); the islands before the swap
-/// are placed as in the current order, and when the current order's packing fails at an island
-/// before the swap, the other order fails there too, without a placement searched.
+/// [`pack_shapes`]' packing of one order by one rule at one scale (the footprints it owns),
+/// kept island by island (the occupancy before each), so that [`GreedyHead::pack`] packs an
+/// order that shares its first islands from where they were placed. Why: the order search tries
+/// orders that differ from the current one by a swap of two islands (the parent module's
+/// `search_orders`); the islands before the swap are placed as in the current order, and when
+/// the current order's packing fails at an island before the swap, the other order fails there
+/// too, without a placement searched.
 pub(super) struct GreedyHead {
+    footprints: Vec<Vec<Footprint>>,
+    side: u32,
+    gutter: u32,
     order: Vec<usize>,
     rule: Rule,
     /// `before[t]`: the occupancy before `order[t]` is placed, for every `t` up to the first
@@ -617,40 +621,45 @@ pub(super) struct GreedyHead {
 impl GreedyHead {
     /// [`pack_shapes`]' packing of `order` by `rule`, kept (type docs).
     pub(super) fn new(
-        footprints: &[Vec<Footprint>],
+        footprints: Vec<Vec<Footprint>>,
         order: &[usize],
         side: u32,
         gutter: u32,
         rule: Rule,
     ) -> Self {
-        let search = Search { footprints, order, gutter, rule, limits: GREEDY, memo: None };
+        let mut head = GreedyHead {
+            footprints,
+            side,
+            gutter,
+            order: order.to_vec(),
+            rule,
+            before: vec![],
+            steps: vec![],
+        };
+        let search = head.search(order, rule);
         let mut occ = Occupancy::new(side, gutter);
         let (mut before, mut steps, mut unlimited) = (Vec::new(), Vec::new(), usize::MAX);
         for &island in order {
             before.push(occ.clone());
             let Some(&(turn, x, y)) = search.places(&occ, island, 1, &mut unlimited).first() else {
-                return GreedyHead { order: order.to_vec(), rule, before, steps };
+                break;
             };
-            occ.occupy(&footprints[island][turn], x, y, gutter);
+            occ.occupy(&head.footprints[island][turn], x, y, gutter);
             steps.push(Step { island, turn, x, y, rank: 0 });
         }
-        before.push(occ);
-        GreedyHead { order: order.to_vec(), rule, before, steps }
+        if steps.len() == order.len() {
+            before.push(occ);
+        }
+        (head.before, head.steps) = (before, steps);
+        head
     }
 
-    /// [`pack_shapes`]`(footprints, order, side, gutter, rule)`, bit for bit; when `rule` is
-    /// the kept rule, only the islands after those `order` shares with the kept order are
-    /// placed (`footprints`, `side` and `gutter` must be those the head was made with).
-    pub(super) fn pack(
-        &self,
-        footprints: &[Vec<Footprint>],
-        order: &[usize],
-        side: u32,
-        gutter: u32,
-        rule: Rule,
-    ) -> Option<Vec<ShapePlaced>> {
+    /// [`pack_shapes`] of `order` by `rule` with the head's footprints, side and gutter, bit for
+    /// bit; when `rule` is the kept rule, only the islands after those `order` shares with the
+    /// kept order are placed.
+    pub(super) fn pack(&self, order: &[usize], rule: Rule) -> Option<Vec<ShapePlaced>> {
         if rule != self.rule {
-            return pack_shapes(footprints, order, side, gutter, rule);
+            return pack_shapes(&self.footprints, order, self.side, self.gutter, rule);
         }
         let shared = order.iter().zip(&self.order).take_while(|(a, b)| a == b).count();
         if shared > self.steps.len() {
@@ -658,36 +667,20 @@ impl GreedyHead {
             // the same occupancy.
             return None;
         }
-        let search = Search { footprints, order, gutter, rule, limits: GREEDY, memo: None };
+        let search = self.search(order, rule);
         let path = self.steps[..shared].to_vec();
         let found = search.rest(self.before[shared].clone(), shared, path, &mut { usize::MAX })?;
         search.placed(found)
     }
+
+    fn search<'a>(&'a self, order: &'a [usize], rule: Rule) -> Search<'a> {
+        Search { footprints: &self.footprints, order, gutter: self.gutter, rule, limits: GREEDY, memo: None }
+    }
 }
 
 /// The search without departures: [`pack_shapes`]' greedy placement.
-const GREEDY: SearchLimits = SearchLimits { depth: 0, width: 1, discrepancies: 0, speculate: false };
-
-/// [`pack_shapes_searched`] with one departure allowed, then two, up to
-/// [`SearchLimits::discrepancies`], until one finds a packing (the iterations of limited
-/// discrepancy search), sharing one `budget`. Each iteration walks again the paths of the one
-/// before (a path with fewer departures is also a path with at most more), in the same order;
-/// so what those paths found is kept ([`Memo`]) and replayed, each call it made paid again
-/// from the budget without being made. So the packing and the budget left are those of calling
-/// [`pack_shapes_searched`] once per iteration, and only the calls are fewer. Measured on the
-/// README bunny's bake (BENCHMARKS.md, "The place search's paths remembered").
-pub(super) fn pack_shapes_deepening(
-    footprints: &[Vec<Footprint>],
-    order: &[usize],
-    side: u32,
-    gutter: u32,
-    rule: Rule,
-    limits: SearchLimits,
-    budget: &mut usize,
-) -> Option<Vec<ShapePlaced>> {
-    let search = Search { footprints, order, gutter, rule, limits, memo: None };
-    search.deepen(side, &Memo::default(), budget)
-}
+const GREEDY: SearchLimits =
+    SearchLimits { depth: 0, width: 1, discrepancies: 0, speculate: false, deepen: false };
 
 /// How far [`pack_shapes_searched`] looks (its docs).
 #[derive(Clone, Copy, Debug)]
@@ -701,6 +694,15 @@ pub(super) struct SearchLimits {
     /// Whether two places of a searched island are searched at once (the result and the budget
     /// left are the same either way; tests compare the two).
     pub speculate: bool,
+    /// Whether the search runs as the iterations of limited discrepancy search: one departure
+    /// allowed, then two, up to `discrepancies`, until one finds a packing, sharing one budget.
+    /// Each iteration walks again the paths of the one before (a path with fewer departures is
+    /// also a path with at most more), in the same order; so what those paths found is kept
+    /// ([`Memo`]) and replayed, each call it made paid again from the budget without being
+    /// made. So the packing and the budget left are those of one search per iteration, and only
+    /// the calls are fewer. Measured on the README bunny's bake (BENCHMARKS.md, "The packing
+    /// searches remember what they walked").
+    pub deepen: bool,
 }
 
 /// One island placed on a search path: its index, orientation (index into its footprints),
@@ -715,7 +717,7 @@ struct Step {
     rank: usize,
 }
 
-/// What a deepening search ([`pack_shapes_deepening`]) has learnt of its tree, by path (the
+/// What a deepening search ([`SearchLimits::deepen`]) has learnt of its tree, by path (the
 /// ranks of the searched islands' places, which fix the occupancy): a searched node's places,
 /// and the leaves whose remaining islands did not all fit. Facts of the geometry, the same
 /// whichever thread or iteration found them; what a search ended by its budget did not finish
@@ -766,12 +768,12 @@ struct Search<'a> {
     gutter: u32,
     rule: Rule,
     limits: SearchLimits,
-    /// Where the paths of earlier iterations are remembered ([`pack_shapes_deepening`]).
+    /// Where the paths of earlier iterations are remembered ([`SearchLimits::deepen`]).
     memo: Option<&'a Memo>,
 }
 
 impl<'a> Search<'a> {
-    /// [`pack_shapes_deepening`] with `memo`: the iterations `1..=limits.discrepancies`.
+    /// The iterations `1..=limits.discrepancies` with `memo` ([`SearchLimits::deepen`]).
     fn deepen(self, side: u32, memo: &'a Memo, budget: &mut usize) -> Option<Vec<ShapePlaced>> {
         (1..=self.limits.discrepancies).find_map(|discrepancies| {
             let limits = SearchLimits { discrepancies, ..self.limits };
@@ -1324,7 +1326,8 @@ mod tests {
             for rule in [Rule::LowestTop, Rule::Corner, Rule::Square] {
                 let greedy = pack_shapes(&fps, &order, side, gutter, rule);
                 for discrepancies in [0, 2] {
-                    let limits = SearchLimits { depth: 3, width: 2, discrepancies, speculate: true };
+                    let limits =
+                        SearchLimits { depth: 3, width: 2, discrepancies, speculate: true, deepen: false };
                     let mut unlimited = usize::MAX;
                     let searched =
                         pack_shapes_searched(&fps, &order, side, gutter, rule, limits, &mut unlimited);
@@ -1348,7 +1351,8 @@ mod tests {
         let (mut rescued, mut tried) = (0, 0);
         for _ in 0..300 {
             let (fps, order, side, gutter) = random_rects(&mut rng);
-            let limits = SearchLimits { depth: 4, width: 2, discrepancies: 2, speculate: true };
+            let limits =
+                SearchLimits { depth: 4, width: 2, discrepancies: 2, speculate: true, deepen: false };
             let searched =
                 pack_shapes_searched(&fps, &order, side, gutter, Rule::LowestTop, limits, &mut 1_000_000);
             if let Some(placed) = &searched {
@@ -1377,7 +1381,8 @@ mod tests {
         let mut exhausted = 0;
         for _ in 0..60 {
             let (fps, order, side, gutter) = random_rects(&mut rng);
-            let one_by_one = SearchLimits { depth: 4, width: 3, discrepancies: 2, speculate: false };
+            let one_by_one =
+                SearchLimits { depth: 4, width: 3, discrepancies: 2, speculate: false, deepen: false };
             let two_at_once = SearchLimits { speculate: true, ..one_by_one };
             let search = |limits, budget: &mut usize| {
                 pack_shapes_searched(&fps, &order, side, gutter, Rule::LowestTop, limits, budget)
@@ -1407,7 +1412,8 @@ mod tests {
         let (mut replayed, mut exhausted, mut found_late) = (0, 0, 0);
         for _ in 0..400 {
             let (footprints, order, side, gutter) = random_rects(&mut rng);
-            let limits = SearchLimits { depth: 4, width: 3, discrepancies: 3, speculate: true };
+            let limits =
+                SearchLimits { depth: 4, width: 3, discrepancies: 3, speculate: true, deepen: false };
             let apart = |budget: &mut usize| {
                 (1..=limits.discrepancies).find_map(|discrepancies| {
                     let limits = SearchLimits { discrepancies, ..limits };
@@ -1431,6 +1437,11 @@ mod tests {
                 let b = search.deepen(side, &memo, &mut two);
                 assert_eq!(a.as_deref().map(spots), b.as_deref().map(spots), "budget {budget}");
                 assert_eq!(one, two, "budget {budget}");
+                // The same through the entry point the place search calls.
+                let (deepening, mut three) = (SearchLimits { deepen: true, ..limits }, budget);
+                let c = pack_shapes_searched(&footprints, &order, side, gutter, rule, deepening, &mut three);
+                assert_eq!(a.as_deref().map(spots), c.as_deref().map(spots), "budget {budget}");
+                assert_eq!(one, three, "budget {budget}");
                 replayed += memo.replayed.load(Ordering::Relaxed);
                 exhausted += usize::from(one == 0);
                 found_late += usize::from(fails_first.is_none() && b.is_some());
@@ -1453,7 +1464,7 @@ mod tests {
         for _ in 0..150 {
             let (fps, order, side, gutter) = random_rects(&mut rng);
             let rule = rules[rng.random_range(0..3)];
-            let head = GreedyHead::new(&fps, &order, side, gutter, rule);
+            let head = GreedyHead::new(fps.clone(), &order, side, gutter, rule);
             let n = order.len();
             for i in 0..n {
                 for j in i..(i + 4).min(n) {
@@ -1461,7 +1472,7 @@ mod tests {
                     candidate.swap(i, j);
                     for r in [rule, rules[rng.random_range(0..3)]] {
                         let whole = pack_shapes(&fps, &candidate, side, gutter, r);
-                        let kept = head.pack(&fps, &candidate, side, gutter, r);
+                        let kept = head.pack(&candidate, r);
                         assert_eq!(whole.as_deref().map(spots), kept.as_deref().map(spots), "swap {i} {j}");
                         failed_before_swap += usize::from(r == rule && i > head.steps.len());
                         placed_from_head += usize::from(r == rule && i > 0 && kept.is_some());
