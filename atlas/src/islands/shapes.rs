@@ -598,23 +598,22 @@ pub(super) fn pack_shapes_searched(
 }
 
 /// [`pack_shapes`]' packing of one order by one rule at one scale (the footprints it owns),
-/// kept island by island (the occupancy before each), so that [`GreedyHead::pack`] packs an
-/// order that shares its first islands from where they were placed. Why: the order search tries
-/// orders that differ from the current one by a swap of two islands (the parent module's
-/// `search_orders`); the islands before the swap are placed as in the current order, and when
-/// the current order's packing fails at an island before the swap, the other order fails there
-/// too, without a placement searched.
+/// kept island by island, so that [`GreedyHead::pack`] packs an order that shares its first
+/// islands from where they were placed. Why: the order search tries orders that differ from the
+/// current one by a swap of two islands (the parent module's `search_orders`); the islands
+/// before the swap are placed as in the current order, and when the current order's packing
+/// fails at an island before the swap, the other order fails there too, without a placement
+/// searched. The occupancy before the swap is rebuilt from the kept places (a fill per island,
+/// far cheaper than searching its place) rather than kept per island: one is `side²` bits, 32
+/// MB at the largest atlas a config allows, and an order has up to `SEARCH_UP_TO` islands.
 pub(super) struct GreedyHead {
     footprints: Vec<Vec<Footprint>>,
     side: u32,
     gutter: u32,
     order: Vec<usize>,
     rule: Rule,
-    /// `before[t]`: the occupancy before `order[t]` is placed, for every `t` up to the first
-    /// island that fits nowhere (then the last entry is the occupancy it did not fit on) or past
-    /// the last island (then the last entry holds all of them).
-    before: Vec<Occupancy>,
-    /// The islands placed, in order.
+    /// The islands the kept order's packing placed, in order: all of them, or those before the
+    /// first that fits nowhere.
     steps: Vec<Step>,
 }
 
@@ -627,30 +626,18 @@ impl GreedyHead {
         gutter: u32,
         rule: Rule,
     ) -> Self {
-        let mut head = GreedyHead {
-            footprints,
-            side,
-            gutter,
-            order: order.to_vec(),
-            rule,
-            before: vec![],
-            steps: vec![],
-        };
+        let mut head = GreedyHead { footprints, side, gutter, order: order.to_vec(), rule, steps: vec![] };
         let search = head.search(order, rule);
         let mut occ = Occupancy::new(side, gutter);
-        let (mut before, mut steps, mut unlimited) = (Vec::new(), Vec::new(), usize::MAX);
+        let (mut steps, mut unlimited) = (Vec::new(), usize::MAX);
         for &island in order {
-            before.push(occ.clone());
             let Some(&(turn, x, y)) = search.places(&occ, island, 1, &mut unlimited).first() else {
                 break;
             };
             occ.occupy(&head.footprints[island][turn], x, y, gutter);
             steps.push(Step { island, turn, x, y, rank: 0 });
         }
-        if steps.len() == order.len() {
-            before.push(occ);
-        }
-        (head.before, head.steps) = (before, steps);
+        head.steps = steps;
         head
     }
 
@@ -667,9 +654,13 @@ impl GreedyHead {
             // the same occupancy.
             return None;
         }
-        let search = self.search(order, rule);
         let path = self.steps[..shared].to_vec();
-        let found = search.rest(self.before[shared].clone(), shared, path, &mut { usize::MAX })?;
+        let mut occ = Occupancy::new(self.side, self.gutter);
+        for s in &path {
+            occ.occupy(&self.footprints[s.island][s.turn], s.x, s.y, self.gutter);
+        }
+        let search = self.search(order, rule);
+        let found = search.rest(occ, shared, path, &mut { usize::MAX })?;
         search.placed(found)
     }
 
