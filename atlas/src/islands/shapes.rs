@@ -627,16 +627,11 @@ impl GreedyHead {
         rule: Rule,
     ) -> Self {
         let mut head = GreedyHead { footprints, side, gutter, order: order.to_vec(), rule, steps: vec![] };
-        let search = head.search(order, rule);
-        let mut occ = Occupancy::new(side, gutter);
-        let (mut steps, mut unlimited) = (Vec::new(), usize::MAX);
-        for &island in order {
-            let Some(&(turn, x, y)) = search.places(&occ, island, 1, &mut unlimited).first() else {
-                break;
-            };
-            occ.occupy(&head.footprints[island][turn], x, y, gutter);
-            steps.push(Step { island, turn, x, y, rank: 0 });
-        }
+        let mut steps = Vec::new();
+        // Without a budget only an island that fits nowhere stops it: `steps` are those before.
+        let _ =
+            head.search(order, rule)
+                .place_greedily(&mut Occupancy::new(side, gutter), 0, &mut steps, &mut { usize::MAX });
         head.steps = steps;
         head
     }
@@ -854,10 +849,10 @@ impl<'a> Search<'a> {
         island: usize,
         width: usize,
         budget: &mut usize,
-    ) -> Vec<(usize, u32, u32)> {
+    ) -> Option<Vec<(usize, u32, u32)>> {
         let fps = &self.footprints[island];
         if !pay(budget, fps.len()) {
-            return Vec::new();
+            return None;
         }
         let mut found: Vec<(Key, usize, u32, u32)> = fps
             .par_iter()
@@ -865,7 +860,7 @@ impl<'a> Search<'a> {
             .filter_map(|(k, fp)| occ.best_fit(fp, self.rule).map(|(key, x, y)| (key, k, x, y)))
             .collect();
         found.sort_unstable_by_key(|&(key, k, ..)| (key, k));
-        found.into_iter().take(width).map(|(_, k, x, y)| (k, x, y)).collect()
+        Some(found.into_iter().take(width).map(|(_, k, x, y)| (k, x, y)).collect())
     }
 
     /// [`Search::places`] of the searched island at the end of `path`, from the [`Memo`] when an
@@ -879,7 +874,7 @@ impl<'a> Search<'a> {
         budget: &mut usize,
     ) -> Vec<(usize, u32, u32)> {
         let Some(memo) = self.memo else {
-            return self.places(occ, island, width, budget);
+            return self.places(occ, island, width, budget).unwrap_or_default();
         };
         if let Some(Known::Places(mut places)) = memo.get(path) {
             if !memo.pay_again(budget, self.footprints[island].len()) {
@@ -888,11 +883,10 @@ impl<'a> Search<'a> {
             places.truncate(width);
             return places;
         }
-        let paid = *budget >= self.footprints[island].len();
-        let mut places = self.places(occ, island, self.limits.width, budget);
-        if paid {
-            memo.put(path, Known::Places(places.clone()));
-        }
+        let Some(mut places) = self.places(occ, island, self.limits.width, budget) else {
+            return Vec::new();
+        };
+        memo.put(path, Known::Places(places.clone()));
         places.truncate(width);
         places
     }
@@ -918,19 +912,44 @@ impl<'a> Search<'a> {
             return None;
         }
         let searched_from = path.len();
-        for (k, &island) in self.order[d..].iter().enumerate() {
-            let paid = *budget >= self.footprints[island].len();
-            let Some(&(turn, x, y)) = self.places(&occ, island, 1, budget).first() else {
-                if let Some(memo) = self.memo.filter(|_| paid) {
-                    memo.put(&path[..searched_from], Known::Fails(k + 1));
+        match self.place_greedily(&mut occ, d, &mut path, budget) {
+            Ok(()) => Some(path),
+            Err(halt) => {
+                if let (Some(memo), Halt::FitsNowhere) = (self.memo, halt) {
+                    let searched = path.len() - searched_from + 1;
+                    memo.put(&path[..searched_from], Known::Fails(searched));
                 }
-                return None;
-            };
+                None
+            }
+        }
+    }
+
+    /// Places `order[d..]` on `occ` one after the other as [`pack_shapes`] does, each appended to
+    /// `path`, until one stops it.
+    fn place_greedily(
+        &self,
+        occ: &mut Occupancy,
+        d: usize,
+        path: &mut Vec<Step>,
+        budget: &mut usize,
+    ) -> Result<(), Halt> {
+        for &island in &self.order[d..] {
+            let places = self.places(occ, island, 1, budget).ok_or(Halt::Spent)?;
+            let &(turn, x, y) = places.first().ok_or(Halt::FitsNowhere)?;
             occ.occupy(&self.footprints[island][turn], x, y, self.gutter);
             path.push(Step { island, turn, x, y, rank: 0 });
         }
-        Some(path)
+        Ok(())
     }
+}
+
+/// Why [`Search::place_greedily`] stopped before the last island.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Halt {
+    /// The next island fits nowhere on the occupancy (whatever the budget).
+    FitsNowhere,
+    /// The budget could not pay for the next island's search.
+    Spent,
 }
 
 /// Takes `calls` from `budget` when it holds them (else empties it): whether the search may go
