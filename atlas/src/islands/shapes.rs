@@ -457,8 +457,9 @@ impl Occupancy {
     }
 
     /// [`Occupancy::best_fit`] of `fp`, orientation `turn` of an island whose orientations are
-    /// searched together: it stops where every position left would rank below the places
-    /// `rivals` holds (then what it returns ranks below them too), and offers them its fit.
+    /// searched together: it offers `rivals` each fit it finds and stops where every position
+    /// it has left ranks after the `width` places they hold, so what it returns is its best fit
+    /// or ranks after those places too ([`Rivals`]).
     fn best_fit_among(
         &self,
         fp: &Footprint,
