@@ -941,11 +941,12 @@ fn best_shapes(
 /// The packing `best` of the order search, raised [`PLACE_SEARCH_STEP`] at a time while
 /// [`shapes::pack_shapes_searched`] finds a packing of the search's last `order` by its last
 /// `rule` at the next scale: first with one departure from the rule's choice, then two, up to
-/// [`PLACE_SEARCH`]'s (`SearchLimits::deepen`); all of it within [`PLACE_SEARCH_BUDGET`] footprint placements searched.
-/// Nothing without the order search (`search == 0`: the necks pass's trial layouts) or beyond
-/// [`SEARCH_UP_TO`] islands. Measured on re-bakes of the 14 Common Shapes checkpoints
-/// (BENCHMARKS.md, "The large islands' places searched"): packing efficiency 0.6800 → 0.6902,
-/// charts unchanged, Editability 0.9676 → 0.9679, the pack phase 0.43 → 0.97 s a mesh.
+/// [`PLACE_SEARCH`]'s (`SearchLimits::deepen`); all of it within [`PLACE_SEARCH_BUDGET`]
+/// footprint placements searched. Nothing without the order search (`search == 0`: the necks
+/// pass's trial layouts) or beyond [`SEARCH_UP_TO`] islands. Measured on re-bakes of the 14
+/// Common Shapes checkpoints (BENCHMARKS.md, "The large islands' places searched"): packing
+/// efficiency 0.6800 → 0.6902, charts unchanged, Editability 0.9676 → 0.9679, the pack phase
+/// 0.43 → 0.97 s a mesh.
 #[allow(clippy::too_many_arguments)]
 fn search_places(
     islands: &[Island],
